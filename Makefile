@@ -1,0 +1,47 @@
+# Two commands do all set-up on a fresh Debian/Ubuntu machine:
+#   make run   - install and open the viewer (or render glassray.png without a display)
+#   make test  - install with test extras and system libraries, then run pytest
+PYTHON ?= python3
+VENV   := .venv
+PY     := $(VENV)/bin/python
+STAMP  := $(VENV)/.installed
+APT_PACKAGES := libegl1 libegl-mesa0 libgl1-mesa-dri libosmesa6 xvfb xdotool
+
+.PHONY: run test system-deps venv clean
+
+# Install Mesa (EGL + OSMesa), Xvfb and xdotool when any is missing and we can.
+system-deps:
+	@missing=""; for p in $(APT_PACKAGES); do \
+	  dpkg -s $$p >/dev/null 2>&1 || missing="$$missing $$p"; done; \
+	if [ -n "$$missing" ]; then \
+	  if command -v apt-get >/dev/null 2>&1 && [ "$$(id -u)" = 0 ]; then \
+	    echo "installing system packages:$$missing"; \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $$missing >/dev/null; \
+	  elif command -v sudo >/dev/null 2>&1 && command -v apt-get >/dev/null 2>&1; then \
+	    sudo apt-get update -qq && sudo DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $$missing >/dev/null; \
+	  else echo "warning: missing system packages:$$missing (install them with your package manager)"; fi; \
+	fi
+
+$(PY):
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+
+$(STAMP): pyproject.toml | $(PY)
+	$(PY) -m pip install -q -e '.[test]'
+	@touch $@
+
+venv: $(STAMP)
+
+run: system-deps $(STAMP)
+	@if [ -n "$$DISPLAY$$WAYLAND_DISPLAY" ] && $(VENV)/bin/glassray view --probe >/dev/null 2>&1; then \
+	  $(VENV)/bin/glassray; \
+	else \
+	  echo "no display (or no viewer): rendering the default scene offscreen instead"; \
+	  $(VENV)/bin/glassray render -o glassray.png && echo "wrote $$(pwd)/glassray.png"; \
+	fi
+
+test: system-deps $(STAMP)
+	$(PY) -m pytest -q
+
+clean:
+	rm -rf $(VENV) build *.egg-info .pytest_cache
