@@ -1,0 +1,679 @@
+"""The scene model: plain dataclasses, TOML loading with full validation, saving.
+
+The contract is ``shared/spec/scene-format.md`` (a copy of the rules is in
+``docs/scene-format.md``).  Everything the renderer, the reference tracer, the
+viewer and the tests know about a scene comes from here; nothing else parses
+TOML.  Validation collects the first error with the file name and the key path
+(``objects[2].radius``) and raises :class:`SceneError`; the CLI turns that into
+one line on stderr and exit status 2.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tempfile
+import tomllib
+from dataclasses import dataclass, field, replace
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+Vec3 = tuple[float, float, float]
+
+SCENES_PACKAGE = "viewer.scenes"
+DEFAULT_SCENE_NAME = "default"
+
+# Implementation limits (documented in the README): the shader keeps the set of
+# transparent solids a ray is inside as a 32-bit mask, and the uniform block
+# holds the objects, materials and lights of one scene.
+MAX_TRANSPARENT_OBJECTS = 32
+MAX_OBJECTS = 256
+MAX_MATERIALS = 256
+MAX_LIGHTS = 64
+
+
+class SceneError(ValueError):
+    """A scene that cannot be used; the message names the file and key path."""
+
+
+# --------------------------------------------------------------------------- data
+
+
+@dataclass
+class Camera:
+    position: Vec3 = (3.2, 2.2, 4.6)
+    target: Vec3 = (0.0, 0.9, 0.0)
+    fov: float = 40.0
+
+
+@dataclass
+class RenderSettings:
+    max_depth: int = 8
+    samples: int = 1
+    min_weight: float = 0.001
+    exposure: float = 1.0
+
+
+@dataclass
+class Sky:
+    type: str = "gradient"
+    color: Vec3 = (0.6, 0.7, 0.9)
+    horizon: Vec3 = (0.8, 0.85, 0.9)
+    zenith: Vec3 = (0.25, 0.4, 0.75)
+    image: str | None = None  # as written in the file
+    image_path: Path | None = None  # resolved against the scene file
+
+
+@dataclass
+class Light:
+    type: str = "point"
+    position: Vec3 | None = None
+    direction: Vec3 | None = None
+    color: Vec3 = (1.0, 1.0, 1.0)
+    intensity: float = 1.0
+
+
+@dataclass
+class Checker:
+    color: Vec3
+    size: float
+    emission: Vec3 | None = None  # None: the material's emission
+
+
+@dataclass
+class Material:
+    color: Vec3 = (0.8, 0.8, 0.8)
+    ambient: float = 0.1
+    diffuse: float = 0.8
+    specular: float = 0.0
+    shininess: float = 32.0
+    reflectivity: float = 0.0
+    transparency: float = 0.0
+    ior: float = 1.0
+    absorption: Vec3 = (0.0, 0.0, 0.0)
+    emission: Vec3 = (0.0, 0.0, 0.0)
+    checker: Checker | None = None
+
+    @property
+    def is_dielectric(self) -> bool:
+        return self.transparency > 0.0
+
+
+@dataclass
+class SceneObject:
+    """One solid.  Only the keys of its ``type`` are meaningful."""
+
+    type: str
+    material: str
+    name: str | None = None
+    # plane: height; cylinder: height (length along the axis)
+    height: float = 0.0
+    # sphere
+    center: Vec3 = (0.0, 0.0, 0.0)
+    radius: float = 0.0
+    # box
+    min: Vec3 = (0.0, 0.0, 0.0)
+    max: Vec3 = (0.0, 0.0, 0.0)
+    rotate: Vec3 = (0.0, 0.0, 0.0)
+    # cylinder
+    axis: str = "y"
+    base: Vec3 = (0.0, 0.0, 0.0)
+    wall: float | None = None
+
+
+@dataclass
+class Scene:
+    name: str
+    camera: Camera = field(default_factory=Camera)
+    render: RenderSettings = field(default_factory=RenderSettings)
+    sky: Sky = field(default_factory=Sky)
+    ambient: Vec3 = (0.05, 0.05, 0.05)
+    lights: list[Light] = field(default_factory=list)
+    materials: dict[str, Material] = field(default_factory=dict)
+    objects: list[SceneObject] = field(default_factory=list)
+    path: Path | None = None  # the file it came from, if any
+
+    def material_of(self, obj: SceneObject) -> Material:
+        return self.materials[obj.material]
+
+    def is_transparent(self, obj: SceneObject) -> bool:
+        return self.materials[obj.material].is_dielectric
+
+    def features(self) -> list[str]:
+        """The shading features this scene uses (what ``check`` prints and the
+        shader specialisation keys on)."""
+        used = [self.materials[o.material] for o in self.objects]
+        feats: list[str] = sorted({o.type for o in self.objects})
+        if any(o.type == "cylinder" and o.wall is not None for o in self.objects):
+            feats.append("vessel")
+        if self.lights:
+            feats.append("shadows")
+        if any(m.reflectivity > 0 for m in used):
+            feats.append("reflection")
+        if any(m.is_dielectric for m in used):
+            feats.append("dielectric")
+        if any(m.is_dielectric and max(m.absorption) > 0 for m in used):
+            feats.append("absorption")
+        if any(m.checker is not None for m in used):
+            feats.append("checker")
+        if any(max(m.emission) > 0 or (m.checker and m.checker.emission and max(m.checker.emission) > 0)
+               for m in used):
+            feats.append("emission")
+        feats.append(f"sky:{self.sky.type}")
+        return feats
+
+    def summary(self) -> str:
+        return (f"{self.name}: {len(self.objects)} objects, {len(self.materials)} materials, "
+                f"{len(self.lights)} lights; features: {', '.join(self.features())}")
+
+
+# --------------------------------------------------------------------------- validation
+
+
+class _Ctx:
+    """Where we are while validating: the file and the key path."""
+
+    def __init__(self, source: str):
+        self.source = source
+
+    def fail(self, path: str, what: str) -> SceneError:
+        where = f"{self.source}: {path}: " if path else f"{self.source}: "
+        return SceneError(where + what)
+
+
+def _join(path: str, key: str | int) -> str:
+    if isinstance(key, int):
+        return f"{path}[{key}]"
+    return f"{path}.{key}" if path else key
+
+
+def _check_keys(ctx: _Ctx, path: str, table: dict, allowed: set[str]) -> None:
+    for key in table:
+        if key not in allowed:
+            raise ctx.fail(_join(path, key), f"unknown key (expected one of: {', '.join(sorted(allowed))})")
+
+
+def _table(ctx: _Ctx, path: str, value: Any) -> dict:
+    if not isinstance(value, dict):
+        raise ctx.fail(path, f"expected a table, got {_typename(value)}")
+    return value
+
+
+def _typename(v: Any) -> str:
+    if isinstance(v, bool):
+        return "a boolean"
+    if isinstance(v, int):
+        return "an integer"
+    if isinstance(v, float):
+        return "a float"
+    if isinstance(v, str):
+        return "a string"
+    if isinstance(v, list):
+        return "an array"
+    if isinstance(v, dict):
+        return "a table"
+    return type(v).__name__
+
+
+def _float(ctx: _Ctx, path: str, v: Any, *, lo: float | None = None, hi: float | None = None,
+           lo_open: bool = False, hi_open: bool = False) -> float:
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise ctx.fail(path, f"expected a number, got {_typename(v)}")
+    x = float(v)
+    if not math.isfinite(x):
+        raise ctx.fail(path, f"expected a finite number, got {v}")
+    if lo is not None and (x <= lo if lo_open else x < lo):
+        raise ctx.fail(path, f"expected a number {'>' if lo_open else '>='} {lo:g}, got {v}")
+    if hi is not None and (x >= hi if hi_open else x > hi):
+        raise ctx.fail(path, f"expected a number {'<' if hi_open else '<='} {hi:g}, got {v}")
+    return x
+
+
+def _int(ctx: _Ctx, path: str, v: Any, lo: int, hi: int) -> int:
+    if isinstance(v, bool) or not isinstance(v, int):
+        raise ctx.fail(path, f"expected an integer, got {_typename(v)}")
+    if not lo <= v <= hi:
+        raise ctx.fail(path, f"expected an integer in {lo}..{hi}, got {v}")
+    return v
+
+
+def _str(ctx: _Ctx, path: str, v: Any, choices: tuple[str, ...] | None = None) -> str:
+    if not isinstance(v, str):
+        raise ctx.fail(path, f"expected a string, got {_typename(v)}")
+    if choices is not None and v not in choices:
+        raise ctx.fail(path, f"expected one of {', '.join(repr(c) for c in choices)}, got {v!r}")
+    return v
+
+
+def _vec3(ctx: _Ctx, path: str, v: Any) -> Vec3:
+    if not isinstance(v, list) or len(v) != 3:
+        raise ctx.fail(path, f"expected an array of 3 numbers [x, y, z], got {_describe(v)}")
+    x, y, z = (_float(ctx, _join(path, i), c) for i, c in enumerate(v))
+    return (x, y, z)
+
+
+def _color(ctx: _Ctx, path: str, v: Any) -> Vec3:
+    if not isinstance(v, list) or len(v) != 3:
+        raise ctx.fail(path, f"expected a colour [r, g, b], got {_describe(v)}")
+    r, g, b = (_float(ctx, _join(path, i), c, lo=0.0) for i, c in enumerate(v))
+    return (r, g, b)
+
+
+def _describe(v: Any) -> str:
+    if isinstance(v, list):
+        return f"an array of {len(v)}"
+    return _typename(v)
+
+
+def _camera(ctx: _Ctx, t: dict) -> Camera:
+    _check_keys(ctx, "camera", t, {"position", "target", "fov"})
+    cam = Camera()
+    if "position" in t:
+        cam.position = _vec3(ctx, "camera.position", t["position"])
+    if "target" in t:
+        cam.target = _vec3(ctx, "camera.target", t["target"])
+    if "fov" in t:
+        cam.fov = _float(ctx, "camera.fov", t["fov"], lo=1.0, hi=179.0)
+    validate_camera(cam, ctx)
+    return cam
+
+
+def validate_camera(cam: Camera, ctx: _Ctx | None = None) -> None:
+    """position != target, and the view is not within 0.01 degrees of +-y."""
+    ctx = ctx or _Ctx("camera")
+    f = [t - p for t, p in zip(cam.target, cam.position)]
+    n = math.sqrt(sum(c * c for c in f))
+    if n == 0.0 or not math.isfinite(n):
+        raise ctx.fail("camera.target", "must differ from camera.position")
+    cos_up = abs(f[1]) / n
+    if cos_up > math.cos(math.radians(0.01)):
+        raise ctx.fail("camera.target",
+                       "the view direction is (within 0.01 degrees of) straight up or down; "
+                       "move the target or the position sideways")
+
+
+def _render(ctx: _Ctx, t: dict) -> RenderSettings:
+    _check_keys(ctx, "render", t, {"max_depth", "samples", "min_weight", "exposure"})
+    r = RenderSettings()
+    if "max_depth" in t:
+        r.max_depth = _int(ctx, "render.max_depth", t["max_depth"], 1, 64)
+    if "samples" in t:
+        r.samples = _int(ctx, "render.samples", t["samples"], 1, 65536)
+    if "min_weight" in t:
+        r.min_weight = _float(ctx, "render.min_weight", t["min_weight"], lo=0.0, hi=1.0)
+    if "exposure" in t:
+        r.exposure = _float(ctx, "render.exposure", t["exposure"], lo=0.0, lo_open=True)
+    return r
+
+
+def _sky(ctx: _Ctx, t: dict, base_dir: Path | None) -> Sky:
+    _check_keys(ctx, "sky", t, {"type", "color", "horizon", "zenith", "image"})
+    s = Sky()
+    if "type" in t:
+        s.type = _str(ctx, "sky.type", t["type"], ("color", "gradient", "image"))
+    for key in ("color", "horizon", "zenith"):
+        if key in t:
+            setattr(s, key, _color(ctx, f"sky.{key}", t[key]))
+    if "image" in t:
+        s.image = _str(ctx, "sky.image", t["image"])
+    if s.type == "image":
+        if s.image is None:
+            raise ctx.fail("sky.image", "required when sky.type is \"image\"")
+        p = Path(s.image)
+        if not p.is_absolute():
+            p = (base_dir or Path.cwd()) / p
+        if p.suffix.lower() not in (".png", ".jpg", ".jpeg", ".pfm"):
+            raise ctx.fail("sky.image", f"expected a .png, .jpg, .jpeg or .pfm picture, got {s.image!r}")
+        if not p.is_file():
+            raise ctx.fail("sky.image", f"no such file: {p}")
+        s.image_path = p
+    return s
+
+
+def _light(ctx: _Ctx, path: str, t: dict) -> Light:
+    typ = _str(ctx, _join(path, "type"), t.get("type", "point"), ("point", "directional"))
+    own = "position" if typ == "point" else "direction"
+    _check_keys(ctx, path, t, {"type", own, "color", "intensity"})
+    light = Light(type=typ)
+    if own not in t:
+        raise ctx.fail(_join(path, own), f"required for a {typ} light")
+    v = _vec3(ctx, _join(path, own), t[own])
+    if typ == "point":
+        light.position = v
+    else:
+        if v == (0.0, 0.0, 0.0):
+            raise ctx.fail(_join(path, own), "must be non-zero")
+        light.direction = v
+    if "color" in t:
+        light.color = _color(ctx, _join(path, "color"), t["color"])
+    if "intensity" in t:
+        light.intensity = _float(ctx, _join(path, "intensity"), t["intensity"], lo=0.0)
+    return light
+
+
+_MATERIAL_KEYS = {"color", "ambient", "diffuse", "specular", "shininess", "reflectivity",
+                  "transparency", "ior", "absorption", "emission", "checker"}
+
+
+def _material(ctx: _Ctx, path: str, t: dict) -> Material:
+    _check_keys(ctx, path, t, _MATERIAL_KEYS)
+    m = Material()
+    for key in ("color", "absorption", "emission"):
+        if key in t:
+            setattr(m, key, _color(ctx, _join(path, key), t[key]))
+    for key in ("ambient", "diffuse", "specular"):
+        if key in t:
+            setattr(m, key, _float(ctx, _join(path, key), t[key], lo=0.0))
+    if "shininess" in t:
+        m.shininess = _float(ctx, _join(path, "shininess"), t["shininess"], lo=1.0)
+    for key in ("reflectivity", "transparency"):
+        if key in t:
+            setattr(m, key, _float(ctx, _join(path, key), t[key], lo=0.0, hi=1.0))
+    if "ior" in t:
+        m.ior = _float(ctx, _join(path, "ior"), t["ior"], lo=1.0)
+    if m.transparency > 0 and m.reflectivity > 0:
+        raise ctx.fail(_join(path, "reflectivity"),
+                       "must be 0 on a dielectric (transparency > 0): Fresnel decides its reflection")
+    if "checker" in t:
+        cpath = _join(path, "checker")
+        c = _table(ctx, cpath, t["checker"])
+        _check_keys(ctx, cpath, c, {"color", "emission", "size"})
+        for key in ("color", "size"):
+            if key not in c:
+                raise ctx.fail(_join(cpath, key), "required")
+        m.checker = Checker(
+            color=_color(ctx, _join(cpath, "color"), c["color"]),
+            size=_float(ctx, _join(cpath, "size"), c["size"], lo=0.0, lo_open=True),
+            emission=_color(ctx, _join(cpath, "emission"), c["emission"]) if "emission" in c else None,
+        )
+    return m
+
+
+_OBJECT_KEYS = {
+    "plane": {"height"},
+    "sphere": {"center", "radius"},
+    "box": {"min", "max", "rotate"},
+    "cylinder": {"axis", "base", "radius", "height", "wall"},
+}
+_REQUIRED = {"plane": (), "sphere": ("center", "radius"), "box": ("min", "max"),
+             "cylinder": ("base", "radius", "height")}
+
+
+def _object(ctx: _Ctx, path: str, t: dict, materials: dict[str, Material]) -> SceneObject:
+    if "type" not in t:
+        raise ctx.fail(_join(path, "type"), "required (one of 'plane', 'sphere', 'box', 'cylinder')")
+    typ = _str(ctx, _join(path, "type"), t["type"], tuple(_OBJECT_KEYS))
+    _check_keys(ctx, path, t, {"type", "material", "name"} | _OBJECT_KEYS[typ])
+    if "material" not in t:
+        raise ctx.fail(_join(path, "material"), "required (a name from [materials])")
+    mat = _str(ctx, _join(path, "material"), t["material"])
+    if mat not in materials:
+        known = ", ".join(sorted(materials)) or "none defined"
+        raise ctx.fail(_join(path, "material"), f"unknown material {mat!r} (known: {known})")
+    o = SceneObject(type=typ, material=mat)
+    if "name" in t:
+        o.name = _str(ctx, _join(path, "name"), t["name"])
+    for key in _REQUIRED[typ]:
+        if key not in t:
+            raise ctx.fail(_join(path, key), f"required for a {typ}")
+    p = lambda k: _join(path, k)  # noqa: E731
+    if typ == "plane":
+        if "height" in t:
+            o.height = _float(ctx, p("height"), t["height"])
+    elif typ == "sphere":
+        o.center = _vec3(ctx, p("center"), t["center"])
+        o.radius = _float(ctx, p("radius"), t["radius"], lo=0.0, lo_open=True)
+    elif typ == "box":
+        o.min = _vec3(ctx, p("min"), t["min"])
+        o.max = _vec3(ctx, p("max"), t["max"])
+        for i, axis in enumerate("xyz"):
+            if not o.min[i] < o.max[i]:
+                raise ctx.fail(p("max"), f"each component of min must be < max ({axis}: "
+                                         f"{o.min[i]:g} >= {o.max[i]:g})")
+        if "rotate" in t:
+            o.rotate = _vec3(ctx, p("rotate"), t["rotate"])
+    else:
+        if "axis" in t:
+            o.axis = _str(ctx, p("axis"), t["axis"], ("x", "y", "z"))
+        o.base = _vec3(ctx, p("base"), t["base"])
+        o.radius = _float(ctx, p("radius"), t["radius"], lo=0.0, lo_open=True)
+        o.height = _float(ctx, p("height"), t["height"], lo=0.0, lo_open=True)
+        if "wall" in t:
+            w = _float(ctx, p("wall"), t["wall"], lo=0.0, lo_open=True)
+            if not (w < o.radius and w < o.height):
+                raise ctx.fail(p("wall"), f"expected 0 < wall < radius and wall < height, got {w:g} "
+                                          f"(radius {o.radius:g}, height {o.height:g})")
+            o.wall = w
+    # finite extents: a box or cylinder whose size overflows is not a solid we can trace
+    return o
+
+
+_TOP_KEYS = {"name", "camera", "render", "sky", "ambient", "lights", "materials", "objects"}
+
+
+def scene_from_dict(data: dict, source: str = "<scene>", base_dir: Path | None = None,
+                    default_name: str = "scene") -> Scene:
+    """Validate a parsed TOML document and build the Scene (raises SceneError)."""
+    ctx = _Ctx(source)
+    _check_keys(ctx, "", data, _TOP_KEYS)
+    name = _str(ctx, "name", data["name"]) if "name" in data else default_name
+    scene = Scene(name=name)
+    if "camera" in data:
+        scene.camera = _camera(ctx, _table(ctx, "camera", data["camera"]))
+    if "render" in data:
+        scene.render = _render(ctx, _table(ctx, "render", data["render"]))
+    if "sky" in data:
+        scene.sky = _sky(ctx, _table(ctx, "sky", data["sky"]), base_dir)
+    if "ambient" in data:
+        scene.ambient = _color(ctx, "ambient", data["ambient"])
+    if "materials" in data:
+        mats = _table(ctx, "materials", data["materials"])
+        for mname, mt in mats.items():
+            mpath = f"materials.{mname}"
+            scene.materials[mname] = _material(ctx, mpath, _table(ctx, mpath, mt))
+    if "lights" in data:
+        lights = data["lights"]
+        if not isinstance(lights, list):
+            raise ctx.fail("lights", f"expected an array of tables ([[lights]]), got {_typename(lights)}")
+        for i, lt in enumerate(lights):
+            lpath = f"lights[{i}]"
+            scene.lights.append(_light(ctx, lpath, _table(ctx, lpath, lt)))
+    if "objects" in data:
+        objs = data["objects"]
+        if not isinstance(objs, list):
+            raise ctx.fail("objects", f"expected an array of tables ([[objects]]), got {_typename(objs)}")
+        names: set[str] = set()
+        for i, ot in enumerate(objs):
+            opath = f"objects[{i}]"
+            o = _object(ctx, opath, _table(ctx, opath, ot), scene.materials)
+            if o.name is not None:
+                if o.name in names:
+                    raise ctx.fail(_join(opath, "name"), f"duplicate object name {o.name!r}")
+                names.add(o.name)
+            scene.objects.append(o)
+    _check_limits(ctx, scene)
+    return scene
+
+
+def _check_limits(ctx: _Ctx, scene: Scene) -> None:
+    if len(scene.objects) > MAX_OBJECTS:
+        raise ctx.fail("objects", f"at most {MAX_OBJECTS} objects are supported, got {len(scene.objects)}")
+    if len(scene.materials) > MAX_MATERIALS:
+        raise ctx.fail("materials", f"at most {MAX_MATERIALS} materials are supported")
+    if len(scene.lights) > MAX_LIGHTS:
+        raise ctx.fail("lights", f"at most {MAX_LIGHTS} lights are supported")
+    n_transparent = sum(scene.is_transparent(o) for o in scene.objects)
+    if n_transparent > MAX_TRANSPARENT_OBJECTS:
+        raise ctx.fail("objects", f"at most {MAX_TRANSPARENT_OBJECTS} transparent objects are supported, "
+                                  f"got {n_transparent}")
+
+
+# --------------------------------------------------------------------------- loading
+
+
+def builtin_scene_names() -> list[str]:
+    files = resources.files(SCENES_PACKAGE)
+    return sorted(p.name[:-5] for p in files.iterdir() if p.name.endswith(".toml"))
+
+
+def resolve_scene_path(spec: str | os.PathLike | None) -> Path:
+    """A path as given, or the name of a scene shipped with the package."""
+    if spec is None:
+        spec = DEFAULT_SCENE_NAME
+    p = Path(spec)
+    if p.exists() or p.suffix == ".toml" or os.sep in str(spec):
+        return p
+    builtin = resources.files(SCENES_PACKAGE) / f"{spec}.toml"
+    if builtin.is_file():
+        return Path(str(builtin))
+    return p
+
+
+def load_scene(spec: str | os.PathLike | None = None) -> Scene:
+    """Load and validate a scene file (or a built-in scene by name)."""
+    path = resolve_scene_path(spec)
+    source = str(spec) if spec is not None else f"<default scene> {path}"
+    try:
+        raw = path.read_bytes()
+    except FileNotFoundError:
+        names = ", ".join(builtin_scene_names())
+        raise SceneError(f"{spec}: no such scene file (built-in scenes: {names})") from None
+    except IsADirectoryError:
+        raise SceneError(f"{spec}: is a directory, not a scene file") from None
+    except OSError as e:
+        raise SceneError(f"{spec}: cannot read: {e.strerror or e}") from None
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise SceneError(f"{source}: not UTF-8 text ({e.reason} at byte {e.start})") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise SceneError(f"{source}: not valid TOML: {e}") from None
+    scene = scene_from_dict(data, source=source, base_dir=path.parent.resolve(), default_name=path.stem)
+    scene.path = path
+    return scene
+
+
+def default_scene() -> Scene:
+    return load_scene(None)
+
+
+# --------------------------------------------------------------------------- saving
+
+
+def scene_to_dict(scene: Scene) -> dict:
+    """The TOML document for a scene; loading it gives back an equal scene."""
+    d: dict[str, Any] = {"name": scene.name, "ambient": list(scene.ambient)}
+    c = scene.camera
+    d["camera"] = {"position": list(c.position), "target": list(c.target), "fov": c.fov}
+    r = scene.render
+    d["render"] = {"max_depth": r.max_depth, "samples": r.samples, "min_weight": r.min_weight,
+                   "exposure": r.exposure}
+    s = scene.sky
+    sky: dict[str, Any] = {"type": s.type, "color": list(s.color), "horizon": list(s.horizon),
+                           "zenith": list(s.zenith)}
+    if s.image is not None:
+        sky["image"] = str(s.image_path) if s.image_path is not None else s.image
+    d["sky"] = sky
+    lights = []
+    for lt in scene.lights:
+        ld: dict[str, Any] = {"type": lt.type}
+        if lt.type == "point":
+            ld["position"] = list(lt.position)
+        else:
+            ld["direction"] = list(lt.direction)
+        ld["color"] = list(lt.color)
+        ld["intensity"] = lt.intensity
+        lights.append(ld)
+    if lights:
+        d["lights"] = lights
+    mats = {}
+    for name, m in scene.materials.items():
+        md: dict[str, Any] = {
+            "color": list(m.color), "ambient": m.ambient, "diffuse": m.diffuse, "specular": m.specular,
+            "shininess": m.shininess, "reflectivity": m.reflectivity, "transparency": m.transparency,
+            "ior": m.ior, "absorption": list(m.absorption), "emission": list(m.emission),
+        }
+        if m.checker is not None:
+            ck: dict[str, Any] = {"color": list(m.checker.color), "size": m.checker.size}
+            if m.checker.emission is not None:
+                ck["emission"] = list(m.checker.emission)
+            md["checker"] = ck
+        mats[name] = md
+    if mats:
+        d["materials"] = mats
+    objs = []
+    for o in scene.objects:
+        od: dict[str, Any] = {"type": o.type, "material": o.material}
+        if o.name is not None:
+            od["name"] = o.name
+        if o.type == "plane":
+            od["height"] = o.height
+        elif o.type == "sphere":
+            od.update(center=list(o.center), radius=o.radius)
+        elif o.type == "box":
+            od.update(min=list(o.min), max=list(o.max), rotate=list(o.rotate))
+        else:
+            od.update(axis=o.axis, base=list(o.base), radius=o.radius, height=o.height)
+            if o.wall is not None:
+                od["wall"] = o.wall
+        objs.append(od)
+    if objs:
+        d["objects"] = objs
+    return d
+
+
+def scene_to_toml(scene: Scene) -> str:
+    import tomli_w
+
+    return tomli_w.dumps(scene_to_dict(scene))
+
+
+def write_atomic(path: Path, data: bytes) -> None:
+    """Write to a temporary file beside ``path`` and rename it into place, so a
+    failed write never leaves a half-written or destroyed file."""
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent or ".")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
+
+
+def save_scene(scene: Scene, path: Path) -> None:
+    write_atomic(Path(path), scene_to_toml(scene).encode("utf-8"))
+
+
+def with_overrides(scene: Scene, **kw) -> Scene:
+    """A copy of the scene with command-line overrides applied (None = keep)."""
+    s = replace(scene, camera=replace(scene.camera), render=replace(scene.render),
+                lights=[replace(lt) for lt in scene.lights])
+    if kw.get("samples") is not None:
+        s.render.samples = kw["samples"]
+    if kw.get("max_depth") is not None:
+        s.render.max_depth = kw["max_depth"]
+    if kw.get("min_weight") is not None:
+        s.render.min_weight = kw["min_weight"]
+    if kw.get("camera_position") is not None:
+        s.camera.position = tuple(kw["camera_position"])
+    if kw.get("camera_target") is not None:
+        s.camera.target = tuple(kw["camera_target"])
+    if kw.get("fov") is not None:
+        s.camera.fov = kw["fov"]
+    if kw.get("light_position") is not None:
+        points = [lt for lt in s.lights if lt.type == "point"]
+        if not points:
+            raise SceneError(f"{s.name}: --light-position: the scene has no point light to move")
+        points[0].position = tuple(kw["light_position"])
+    validate_camera(s.camera, _Ctx("command line"))
+    return s
