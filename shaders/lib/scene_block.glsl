@@ -1,0 +1,59 @@
+// The scene as the GPU sees it.  Mirrored on the Python side by the numpy
+// dtypes in viewer/gpu_scene.py: every member is vec4/ivec4 sized so std140
+// never inserts padding.  All positions are camera-relative (the eye is at
+// the origin; the shift is done in float64 on the CPU).
+//
+// Compile-time constants injected by viewer/shaders.py:
+//   NUM_OBJECTS, NUM_MATERIALS, NUM_LIGHTS, NUM_TRANSPARENT (counts, may be 0)
+//   OBJECTS_LEN, MATERIALS_LEN, LIGHTS_LEN, MEDIA_LEN (array sizes, >= 1)
+//   STACK_SIZE (ray-tree stack: max_depth + 1 entries suffice for a
+//   depth-first walk that pushes at most two children per node)
+
+#define OBJ_PLANE 0
+#define OBJ_SPHERE 1
+#define OBJ_BOX 2
+#define OBJ_CYLINDER 3
+
+#define SKY_COLOR 0
+#define SKY_GRADIENT 1
+#define SKY_IMAGE 2
+
+struct Object {
+    vec4 a;      // plane: a.x = height | sphere: centre, radius | box: centre | cylinder: base, radius
+    vec4 b;      // box: half extents | cylinder: b.x = height, b.y = wall (0: solid)
+    vec4 c;      // box: rows of localFromWorld (rotation), c, d, e
+    vec4 d;
+    vec4 e;
+    ivec4 info;  // x: type, y: material index, z: cylinder axis (0,1,2), w: transparent slot or -1
+};
+
+struct Material {
+    vec4 colorAmbient;       // rgb: C, a: k_a
+    vec4 phong;              // k_d, k_s, p, reflectivity
+    vec4 dielectric;         // transparency, ior, hasChecker (0/1), checker size
+    vec4 absorption;         // rgb
+    vec4 emission;           // rgb
+    vec4 checkerColor;       // rgb
+    vec4 checkerEmission;    // rgb
+    vec4 checkerOffset;      // xy: eye's world (x, z) modulo 2 * size, for the parity
+};
+
+struct Light {
+    vec4 vector;    // xyz: camera-relative position (point) or unit direction of travel; w: 0 point, 1 directional
+    vec4 radiance;  // rgb: color * intensity
+};
+
+layout(std140) uniform SceneBlock {
+    Object objects[OBJECTS_LEN];
+    Material materials[MATERIALS_LEN];
+    Light lights[LIGHTS_LEN];
+    ivec4 media[MEDIA_LEN];   // per transparent slot: x object index, y material index
+    vec4 ambient;             // rgb
+    vec4 skyColor;
+    vec4 skyHorizon;
+    vec4 skyZenith;
+    vec4 params;              // x: epsAbs, y: epsRel, z: minWeight, w: exposure
+    ivec4 iparams;            // x: maxDepth, y: initial medium mask (uint bits), z: sky type, w: unused
+};
+
+uniform sampler2D skyImage;

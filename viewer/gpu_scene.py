@@ -1,0 +1,203 @@
+"""The scene packed for the GPU: numpy structured dtypes that mirror the GLSL
+uniform block in shaders/lib/scene_block.glsl member for member (all vec4 /
+ivec4 sized, so std140 adds no padding), the compile-time defines, and the
+camera uniforms.
+
+Everything is camera-relative: positions have the eye subtracted in float64
+here, so a scene far from the world origin keeps float32 precision where it
+matters (near the eye).  The checker's world anchoring is kept by passing the
+eye's (x, z) modulo 2 * size (the period of the parity).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .scene import Scene, SceneObject
+
+OBJ_TYPES = {"plane": 0, "sphere": 1, "box": 2, "cylinder": 3}
+SKY_TYPES = {"color": 0, "gradient": 1, "image": 2}
+AXES = {"x": 0, "y": 1, "z": 2}
+
+OBJECT_DTYPE = np.dtype([("a", "<f4", 4), ("b", "<f4", 4), ("c", "<f4", 4), ("d", "<f4", 4),
+                         ("e", "<f4", 4), ("info", "<i4", 4)])
+MATERIAL_DTYPE = np.dtype([("colorAmbient", "<f4", 4), ("phong", "<f4", 4), ("dielectric", "<f4", 4),
+                           ("absorption", "<f4", 4), ("emission", "<f4", 4), ("checkerColor", "<f4", 4),
+                           ("checkerEmission", "<f4", 4), ("checkerOffset", "<f4", 4)])
+LIGHT_DTYPE = np.dtype([("vector", "<f4", 4), ("radiance", "<f4", 4)])
+MEDIUM_DTYPE = np.dtype([("index", "<i4", 4)])
+TAIL_DTYPE = np.dtype([("ambient", "<f4", 4), ("skyColor", "<f4", 4), ("skyHorizon", "<f4", 4),
+                       ("skyZenith", "<f4", 4), ("params", "<f4", 4), ("iparams", "<i4", 4)])
+assert OBJECT_DTYPE.itemsize == 96 and MATERIAL_DTYPE.itemsize == 128 and LIGHT_DTYPE.itemsize == 32
+
+# Offsets for leaving a surface (see surfaceEps in trace.frag).
+EPS_REL = 1e-5        # of the hit point's magnitude (camera-relative)
+EPS_SCENE = 1e-6      # of the scene's size
+
+
+def rotation_world_from_local(deg: tuple[float, float, float]) -> np.ndarray:
+    """Rz @ Ry @ Rx, right-handed, angles in degrees (x applied first)."""
+    ax, ay, az = (math.radians(a) for a in deg)
+    cx, sx, cy, sy, cz, sz = math.cos(ax), math.sin(ax), math.cos(ay), math.sin(ay), math.cos(az), math.sin(az)
+    rx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
+    ry = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
+    rz = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
+    return rz @ ry @ rx
+
+
+def contains_point(obj: SceneObject, p: np.ndarray) -> bool:
+    """Strict point-in-solid in float64 (used for the eye's starting medium)."""
+    p = np.asarray(p, dtype=np.float64)
+    if obj.type == "plane":
+        return bool(p[1] < obj.height)
+    if obj.type == "sphere":
+        return bool(np.sum((p - obj.center) ** 2) < obj.radius ** 2)
+    if obj.type == "box":
+        c = (np.array(obj.min) + np.array(obj.max)) / 2
+        half = (np.array(obj.max) - np.array(obj.min)) / 2
+        q = rotation_world_from_local(obj.rotate).T @ (p - c)
+        return bool(np.all(np.abs(q) < half))
+    ax = AXES[obj.axis]
+    q = p - np.array(obj.base)
+    along = q[ax]
+    rho2 = float(np.sum(np.delete(q, ax) ** 2))
+    inside = rho2 < obj.radius ** 2 and 0 < along < obj.height
+    if obj.wall is not None:
+        ri = obj.radius - obj.wall
+        inside = inside and not (rho2 < ri ** 2 and along > obj.wall)
+    return inside
+
+
+def scene_scale(scene: Scene) -> float:
+    """A length for the scene: bounded objects' extent and the camera distance."""
+    eye = np.array(scene.camera.position)
+    pts = [eye, np.array(scene.camera.target)]
+    for o in scene.objects:
+        if o.type == "sphere":
+            pts += [np.array(o.center) - o.radius, np.array(o.center) + o.radius]
+        elif o.type == "box":
+            pts += [np.array(o.min), np.array(o.max)]
+        elif o.type == "cylinder":
+            pts += [np.array(o.base) - o.radius, np.array(o.base) + o.radius + o.height]
+    pts = np.array(pts)
+    return float(max(np.max(pts.max(axis=0) - pts.min(axis=0)), 1e-30))
+
+
+@dataclass
+class PackedScene:
+    block: bytes
+    defines: dict[str, object]
+    eye: np.ndarray  # world position of the eye (float64)
+
+
+def shader_defines(scene: Scene) -> dict[str, object]:
+    """Compile-time constants of the shader for this scene: counts and the
+    features present."""
+    n_obj = len(scene.objects)
+    n_tr = sum(scene.is_transparent(o) for o in scene.objects)
+    used = [scene.materials[o.material] for o in scene.objects]
+    d: dict[str, object] = {
+        "NUM_OBJECTS": n_obj, "OBJECTS_LEN": max(1, n_obj),
+        "NUM_MATERIALS": len(scene.materials), "MATERIALS_LEN": max(1, len(scene.materials)),
+        "NUM_LIGHTS": len(scene.lights), "LIGHTS_LEN": max(1, len(scene.lights)),
+        "NUM_TRANSPARENT": n_tr, "MEDIA_LEN": max(1, n_tr),
+        "STACK_SIZE": scene.render.max_depth + 1,
+    }
+    for t in OBJ_TYPES:
+        if any(o.type == t for o in scene.objects):
+            d[f"HAS_{t.upper()}"] = True
+    if n_tr:
+        d["HAS_DIELECTRIC"] = True
+    if any(m.reflectivity > 0 for m in used):
+        d["HAS_REFLECTION"] = True
+    if scene.sky.type == "image":
+        d["HAS_SKY_IMAGE"] = True
+    return d
+
+
+def pack_scene(scene: Scene) -> PackedScene:
+    eye = np.array(scene.camera.position, dtype=np.float64)
+    mat_index = {name: i for i, name in enumerate(scene.materials)}
+
+    objs = np.zeros(max(1, len(scene.objects)), OBJECT_DTYPE)
+    media = np.zeros(max(1, len(scene.objects)), MEDIUM_DTYPE)
+    slot = 0
+    initial_mask = 0
+    for k, o in enumerate(scene.objects):
+        rec = objs[k]
+        tr = scene.is_transparent(o)
+        rec["info"] = (OBJ_TYPES[o.type], mat_index[o.material], AXES.get(o.axis, 1), slot if tr else -1)
+        if o.type == "plane":
+            rec["a"][0] = o.height - eye[1]
+        elif o.type == "sphere":
+            rec["a"] = (*(np.array(o.center) - eye), o.radius)
+        elif o.type == "box":
+            c = (np.array(o.min) + np.array(o.max)) / 2
+            rec["a"][:3] = c - eye
+            rec["b"][:3] = (np.array(o.max) - np.array(o.min)) / 2
+            local_from_world = rotation_world_from_local(o.rotate).T
+            rec["c"][:3], rec["d"][:3], rec["e"][:3] = local_from_world
+        else:
+            rec["a"] = (*(np.array(o.base) - eye), o.radius)
+            rec["b"][:2] = (o.height, o.wall or 0.0)
+        if tr:
+            media[slot]["index"] = (k, mat_index[o.material], 0, 0)
+            if contains_point(o, eye):
+                initial_mask |= 1 << slot
+            slot += 1
+
+    mats = np.zeros(max(1, len(scene.materials)), MATERIAL_DTYPE)
+    for i, m in enumerate(scene.materials.values()):
+        rec = mats[i]
+        rec["colorAmbient"] = (*m.color, m.ambient)
+        rec["phong"] = (m.diffuse, m.specular, m.shininess, m.reflectivity)
+        rec["absorption"][:3] = m.absorption
+        rec["emission"][:3] = m.emission
+        if m.checker is not None:
+            s = m.checker.size
+            rec["dielectric"] = (m.transparency, m.ior, 1.0, s)
+            rec["checkerColor"][:3] = m.checker.color
+            rec["checkerEmission"][:3] = m.checker.emission if m.checker.emission is not None else m.emission
+            rec["checkerOffset"][:2] = (math.fmod(eye[0], 2 * s), math.fmod(eye[2], 2 * s))
+        else:
+            rec["dielectric"] = (m.transparency, m.ior, 0.0, 1.0)
+
+    lights = np.zeros(max(1, len(scene.lights)), LIGHT_DTYPE)
+    for j, lt in enumerate(scene.lights):
+        if lt.type == "point":
+            lights[j]["vector"] = (*(np.array(lt.position) - eye), 0.0)
+        else:
+            d = np.array(lt.direction, dtype=np.float64)
+            lights[j]["vector"] = (*(d / np.linalg.norm(d)), 1.0)
+        lights[j]["radiance"][:3] = np.array(lt.color) * lt.intensity
+
+    tail = np.zeros(1, TAIL_DTYPE)
+    tail["ambient"][0, :3] = scene.ambient
+    tail["skyColor"][0, :3] = scene.sky.color
+    tail["skyHorizon"][0, :3] = scene.sky.horizon
+    tail["skyZenith"][0, :3] = scene.sky.zenith
+    r = scene.render
+    tail["params"][0] = (EPS_SCENE * scene_scale(scene), EPS_REL, r.min_weight, r.exposure)
+    # the mask travels as the bits of a signed int (uint(...) in GLSL restores them)
+    tail["iparams"][0] = (r.max_depth, np.int32(np.uint32(initial_mask).view(np.int32)),
+                          SKY_TYPES[scene.sky.type], 0)
+
+    n_tr = slot
+    block = b"".join([objs.tobytes(), mats.tobytes(), lights.tobytes(),
+                      media[: max(1, n_tr)].tobytes(), tail.tobytes()])
+    return PackedScene(block=block, defines=shader_defines(scene), eye=eye)
+
+
+def camera_uniforms(scene: Scene, width: int, height: int) -> dict[str, tuple[float, ...]]:
+    """f, right * t * W/H and up * t of the spec's pinhole model (float64 math)."""
+    c = scene.camera
+    f = np.array(c.target, dtype=np.float64) - np.array(c.position, dtype=np.float64)
+    f /= np.linalg.norm(f)
+    right = np.cross(f, [0.0, 1.0, 0.0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, f)
+    t = math.tan(math.radians(c.fov) / 2)
+    return {"camForward": tuple(f), "camRight": tuple(right * t * width / height), "camUp": tuple(up * t)}

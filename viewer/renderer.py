@@ -1,0 +1,167 @@
+"""One renderer for the window and for offscreen images.
+
+It owns the shader programs (cached by their compile-time defines), the
+scene's uniform block and the sky texture, and draws one pixel sample per
+draw into whatever framebuffer it is given.  Offscreen, samples are summed
+with additive blending in an RGBA32F framebuffer; a large image is drawn in
+tiles (scissor rectangles) so that no single draw call runs long enough to
+trip a GPU driver's watchdog.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Callable
+
+import moderngl
+import numpy as np
+
+from .gpu_scene import camera_uniforms, pack_scene
+from .imageio import read_sky_image
+from .sampling import sample_offsets
+from .scene import Scene
+from .shaders import build_program
+
+# Pixels per draw call: big enough to keep the GPU busy, small enough that a
+# deep ray tree on a slow GPU stays far from a ~2 s watchdog.
+DEFAULT_TILE = 512
+
+
+class Renderer:
+    def __init__(self, ctx: moderngl.Context, scene: Scene, tile: int = DEFAULT_TILE):
+        self.ctx = ctx
+        self.tile = tile
+        self._programs: dict[tuple, moderngl.Program] = {}
+        self._vao_for: dict[int, moderngl.VertexArray] = {}
+        self._ubo: moderngl.Buffer | None = None
+        self._sky: moderngl.Texture | None = None
+        self._sky_path = None
+        self.scene: Scene | None = None
+        self.program: moderngl.Program | None = None
+        self.set_scene(scene)
+
+    # ------------------------------------------------------------ scene
+
+    def set_scene(self, scene: Scene) -> None:
+        """Upload a scene; recompiles only when its feature key changes."""
+        packed = pack_scene(scene)
+        key = tuple(sorted(packed.defines.items()))
+        prog = self._programs.get(key)
+        if prog is None:
+            prog = build_program(self.ctx, defines=packed.defines)
+            self._programs[key] = prog
+        self.program = prog
+        if self._ubo is None or self._ubo.size != len(packed.block):
+            if self._ubo is not None:
+                self._ubo.release()
+            self._ubo = self.ctx.buffer(packed.block)
+        else:
+            self._ubo.write(packed.block)
+        self._update_sky(scene)
+        self.scene = scene
+
+    def _update_sky(self, scene: Scene) -> None:
+        path = scene.sky.image_path if scene.sky.type == "image" else None
+        if path == self._sky_path and self._sky is not None:
+            return
+        if self._sky is not None:
+            self._sky.release()
+        if path is not None:
+            img = read_sky_image(path)
+            h, w, _ = img.shape
+            tex = self.ctx.texture((w, h), 3, np.ascontiguousarray(img, dtype="f4").tobytes(), dtype="f4")
+            tex.repeat_x, tex.repeat_y = True, False
+        else:
+            tex = self.ctx.texture((1, 1), 3, np.zeros(3, "f4").tobytes(), dtype="f4")
+        tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
+        self._sky, self._sky_path = tex, path
+
+    def _vao(self) -> moderngl.VertexArray:
+        vao = self._vao_for.get(id(self.program))
+        if vao is None:
+            vao = self.ctx.vertex_array(self.program, [])
+            self._vao_for[id(self.program)] = vao
+        return vao
+
+    # ------------------------------------------------------------ drawing
+
+    def _set(self, name: str, value) -> None:
+        if name in self.program:
+            self.program[name].value = value
+
+    def draw_sample(self, width: int, height: int, offset: tuple[float, float],
+                    viewport: tuple[int, int, int, int] | None = None) -> None:
+        """Trace one sample per pixel of the bound framebuffer (additively if
+        blending is on).  viewport limits the work to a rectangle (x, y, w, h)
+        in framebuffer pixels, bottom-left origin."""
+        prog = self.program
+        block_index = prog["SceneBlock"]
+        block_index.binding = 0
+        self._ubo.bind_to_uniform_block(0)
+        self._sky.use(location=0)
+        self._set("skyImage", 0)
+        self._set("imageSize", (float(width), float(height)))
+        self._set("sampleOffset", (float(offset[0]), float(offset[1])))
+        for name, v in camera_uniforms(self.scene, width, height).items():
+            self._set(name, v)
+        self.ctx.scissor = viewport
+        self._vao().render(moderngl.TRIANGLES, vertices=3)
+        self.ctx.scissor = None
+
+    def tiles(self, width: int, height: int) -> list[tuple[int, int, int, int]]:
+        t = self.tile
+        return [(x, y, min(t, width - x), min(t, height - y))
+                for y in range(0, height, t) for x in range(0, width, t)]
+
+    def render(self, width: int, height: int, samples: int | None = None, seed: int = 0,
+               progress: Callable[[int, int], None] | None = None) -> np.ndarray:
+        """(H, W, 3) float32 linear RGB, exposure applied, first row = top."""
+        samples = samples or self.scene.render.samples
+        offsets = sample_offsets(samples, seed)
+        ctx = self.ctx
+        fbo = ctx.simple_framebuffer((width, height), components=4, dtype="f4")
+        try:
+            fbo.use()
+            fbo.clear(0.0, 0.0, 0.0, 0.0)
+            ctx.enable(moderngl.BLEND)
+            ctx.blend_func = moderngl.ONE, moderngl.ONE
+            ctx.blend_equation = moderngl.FUNC_ADD
+            tiles = self.tiles(width, height)
+            total, done = samples * len(tiles), 0
+            for off in offsets:
+                for rect in tiles:
+                    self.draw_sample(width, height, off, rect)
+                    done += 1
+                    if progress is not None:
+                        ctx.finish()
+                        progress(done, total)
+            ctx.disable(moderngl.BLEND)
+            raw = fbo.read(components=4, dtype="f4")
+        finally:
+            fbo.release()
+        img = np.frombuffer(raw, dtype=np.float32).reshape(height, width, 4)[::-1, :, :3]
+        return np.ascontiguousarray(img / np.float32(samples))
+
+    def time_render(self, width: int, height: int, samples: int, repeat: int, seed: int = 0) -> list[float]:
+        """Wall-clock ms of `repeat` renders after one warm-up, each finished
+        on the GPU (the read-back waits for it) before its clock stops."""
+        self.render(width, height, samples, seed)
+        times = []
+        for _ in range(repeat):
+            t0 = time.perf_counter()
+            self.render(width, height, samples, seed)
+            self.ctx.finish()
+            times.append((time.perf_counter() - t0) * 1000.0)
+        return times
+
+    def release(self) -> None:
+        for vao in self._vao_for.values():
+            vao.release()
+        for prog in self._programs.values():
+            prog.release()
+        for res in (self._ubo, self._sky):
+            if res is not None:
+                res.release()
+        self._vao_for.clear()
+        self._programs.clear()
+        self._ubo = self._sky = None

@@ -1,0 +1,114 @@
+"""Shader sources: loading from the package, ``#include`` resolution and
+``#define`` injection, and error messages that name the file and line.
+
+The GLSL lives in the top-level ``shaders/`` folder, shipped inside the wheel
+as the resource package ``viewer.shaders``.  ``#include "lib/x.glsl"`` is
+resolved relative to the including file; each piece is preceded by a
+``#line N FILE`` directive (FILE is an integer in GLSL 330), so the
+compiler's ``0:12(3): error`` can be mapped back to ``lib/x.glsl:12``.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+
+_INCLUDE = re.compile(r'^\s*#\s*include\s+"([^"]+)"\s*$')
+_VERSION = re.compile(r"^\s*#\s*version\b")
+
+
+class ShaderError(RuntimeError):
+    """A shader that failed to load, compile or link; message has file:line."""
+
+
+def shader_root() -> Path:
+    """The folder holding trace.frag (inside the installed package, or the
+    repository's shaders/ for an editable install)."""
+    try:
+        root = resources.files("viewer.shaders")
+        p = Path(str(root))
+        if (p / "trace.frag").is_file():
+            return p
+    except (ModuleNotFoundError, TypeError):
+        pass
+    return Path(__file__).resolve().parent.parent / "shaders"
+
+
+@dataclass
+class Source:
+    text: str
+    files: list[str] = field(default_factory=list)  # index -> file name for #line
+
+
+def load_source(name: str, defines: dict[str, object] | None = None, root: Path | None = None) -> Source:
+    """Read ``name`` with its includes resolved and ``defines`` injected right
+    after ``#version``."""
+    root = root or shader_root()
+    files: list[str] = []
+    out: list[str] = []
+    version_line: list[str] = []
+
+    def emit(rel: str, stack: tuple[str, ...]) -> None:
+        if rel in stack:
+            raise ShaderError(f"{rel}: #include cycle: {' -> '.join(stack + (rel,))}")
+        path = root / rel
+        try:
+            text = path.read_text(encoding="utf-8")
+        except OSError as e:
+            where = f" (included from {stack[-1]})" if stack else ""
+            raise ShaderError(f"{rel}: cannot read shader{where}: {e.strerror or e}") from None
+        index = len(files)
+        files.append(rel)
+        out.append(f"#line 1 {index}")
+        for lineno, line in enumerate(text.splitlines(), start=1):
+            if _VERSION.match(line):
+                if stack or version_line:
+                    raise ShaderError(f"{rel}:{lineno}: #version only belongs at the top of the main shader")
+                version_line.append(line)
+                out.append("")  # keep line numbers
+                continue
+            m = _INCLUDE.match(line)
+            if m:
+                inc = str((Path(rel).parent / m.group(1)).as_posix())
+                emit(inc, stack + (rel,))
+                out.append(f"#line {lineno + 1} {index}")
+                continue
+            out.append(line)
+
+    emit(name, ())
+    header = version_line[0] if version_line else "#version 330 core"
+    define_lines = [f"#define {k} {'' if v is True else v}".rstrip() for k, v in (defines or {}).items()
+                    if v is not False and v is not None]
+    text = "\n".join([header, *define_lines, *out]) + "\n"
+    return Source(text, files)
+
+
+# Mesa: "0:12(3): error: ..."; NVIDIA: "0(12) : error ..."; ANGLE/others: "ERROR: 0:12: ..."
+_LOCATION = re.compile(r"(?P<file>\d+)(?::|\()(?P<line>\d+)\)?(?:\((?P<col>\d+)\))?")
+
+
+def explain_compile_error(message: str, files: list[str]) -> str:
+    """Rewrite file indices in a driver's log into shader file names."""
+    lines = []
+    for raw in str(message).splitlines():
+        m = _LOCATION.search(raw)
+        if m and int(m.group("file")) < len(files):
+            where = f"{files[int(m.group('file'))]}:{m.group('line')}"
+            raw = raw[: m.start()] + where + raw[m.end():]
+        lines.append(raw)
+    return "\n".join(lines)
+
+
+def build_program(ctx, fragment: str = "trace.frag", vertex: str = "fullscreen.vert",
+                  defines: dict[str, object] | None = None, root: Path | None = None):
+    """Compile and link; raise ShaderError with file:line locations."""
+    vs = load_source(vertex, None, root)
+    fs = load_source(fragment, defines, root)
+    try:
+        return ctx.program(vertex_shader=vs.text, fragment_shader=fs.text)
+    except Exception as e:  # moderngl raises moderngl.Error with the driver's log
+        msg = str(e)
+        files = fs.files if "fragment" in msg.lower() or "vertex" not in msg.lower() else vs.files
+        raise ShaderError(f"shader compilation failed:\n{explain_compile_error(msg, files)}") from None
