@@ -1,0 +1,295 @@
+"""Command line: ``glassray [view|render|check|bench|stress] ...``.
+
+Exit status (shared/spec/cli.md): 0 success; 2 bad usage, a scene that is
+missing, unreadable or invalid, or an output with an unknown extension; 1 any
+other failure (no OpenGL context, an output that cannot be written).  One
+clear message on stderr; a traceback only with --debug.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import statistics
+import sys
+import time
+from pathlib import Path
+
+SUBCOMMANDS = ("view", "render", "check", "bench", "stress")
+VECTOR_OPTIONS = ("--camera-position", "--camera-target", "--light-position")
+
+
+class UsageError(Exception):
+    """Bad usage detected after parsing: exit 2."""
+
+
+class Failure(Exception):
+    """Any other failure: exit 1."""
+
+
+# ---------------------------------------------------------------- argument types
+
+
+def _vec3(text: str) -> tuple[float, float, float]:
+    parts = text.split(",")
+    try:
+        vals = tuple(float(p) for p in parts)
+    except ValueError:
+        vals = ()
+    if len(vals) != 3 or not all(math.isfinite(v) for v in vals):
+        raise argparse.ArgumentTypeError(f"expected three finite numbers x,y,z, got {text!r}")
+    return vals  # type: ignore[return-value]
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(p) for p in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected WxH such as 1280x720, got {text!r}") from None
+    if not (1 <= w <= 16384 and 1 <= h <= 16384):
+        raise argparse.ArgumentTypeError(f"width and height must be in 1..16384, got {text!r}")
+    return w, h
+
+
+def _int_range(lo: int, hi: int):
+    def parse(text: str) -> int:
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+        if not lo <= v <= hi:
+            raise argparse.ArgumentTypeError(f"expected an integer in {lo}..{hi}, got {v}")
+        return v
+    return parse
+
+
+def _float_range(lo: float, hi: float, lo_open: bool = False):
+    def parse(text: str) -> float:
+        try:
+            v = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+        if not math.isfinite(v) or (v <= lo if lo_open else v < lo) or v > hi:
+            raise argparse.ArgumentTypeError(f"expected a number in {'(' if lo_open else '['}{lo:g}, {hi:g}], "
+                                             f"got {text!r}")
+        return v
+    return parse
+
+
+# ---------------------------------------------------------------- parser
+
+
+def _add_common(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--debug", action="store_true", help="show tracebacks on failure")
+
+
+def _add_overrides(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("scene overrides (each replaces the scene file's value)")
+    g.add_argument("--samples", type=_int_range(1, 65536), metavar="N", help="samples per pixel")
+    g.add_argument("--max-depth", type=_int_range(1, 64), metavar="N", help="longest chain of interactions")
+    g.add_argument("--min-weight", type=_float_range(0.0, 1.0), metavar="X", help="branch weight cut-off")
+    g.add_argument("--camera-position", type=_vec3, metavar="x,y,z")
+    g.add_argument("--camera-target", type=_vec3, metavar="x,y,z")
+    g.add_argument("--fov", type=_float_range(1.0, 179.0), metavar="DEG", help="vertical field of view")
+    g.add_argument("--light-position", type=_vec3, metavar="x,y,z", help="moves the first point light")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="glassray",
+        description="A real-time Whitted ray tracer: a rod in a glass of liquid, traced in a fragment shader.",
+        epilog="Without a subcommand, 'view' is run. See 'glassray SUBCOMMAND --help'.")
+    from . import __version__
+    parser.add_argument("--version", action="version", version=f"glassray {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="{view,render,check,bench,stress}")
+
+    v = sub.add_parser("view", help="the interactive viewer (default)",
+                       description="Open the interactive viewer on SCENE (the default scene without one).")
+    v.add_argument("scene", nargs="?", metavar="SCENE", help="scene file or built-in scene name")
+    v.add_argument("--size", type=_size, default=(1280, 720), metavar="WxH", help="window size (1280x720)")
+    v.add_argument("--vsync", action=argparse.BooleanOptionalAction, default=True, help="sync to the display")
+    _add_overrides(v)
+    _add_common(v)
+
+    r = sub.add_parser("render", help="render offscreen to .png, .npy or .pfm",
+                       description="Render SCENE offscreen (EGL, OSMesa as a fallback) and write OUT "
+                                   "by its extension: .png (8-bit sRGB), .npy (float32 HxWx3 linear), "
+                                   ".pfm (linear float map).")
+    r.add_argument("scene", nargs="?", metavar="SCENE", help="scene file or built-in scene name")
+    r.add_argument("-o", "--output", required=True, metavar="OUT", help="output file (.png, .npy or .pfm)")
+    r.add_argument("--size", type=_size, default=(1280, 720), metavar="WxH", help="image size (1280x720)")
+    r.add_argument("--seed", type=_int_range(0, 2**63 - 1), default=0, metavar="N",
+                   help="sample pattern seed (0); the same seed gives the same image")
+    r.add_argument("--backend", choices=("auto", "egl", "osmesa"), default="auto",
+                   help="OpenGL context: EGL, OSMesa, or EGL falling back to OSMesa (auto)")
+    r.add_argument("--timing", action="store_true",
+                   help="after a warm-up, render --repeat more times and print the median ms per frame")
+    r.add_argument("--repeat", type=_int_range(1, 1000), default=5, metavar="N", help="timed renders (5)")
+    _add_overrides(r)
+    _add_common(r)
+
+    c = sub.add_parser("check", help="validate a scene file",
+                       description="Validate SCENE (the default scene without one) and print a summary.")
+    c.add_argument("scene", nargs="?", metavar="SCENE")
+    _add_common(c)
+
+    for name, text in (("bench", "speed against error benchmark"), ("stress", "numerical stability suite")):
+        b = sub.add_parser(name, help=f"{text} (not built yet)", description=f"The {text}: not built yet.")
+        if name == "bench":
+            b.add_argument("scene", nargs="?", metavar="SCENE")
+        _add_common(b)
+    return parser
+
+
+def normalise_argv(argv: list[str]) -> list[str]:
+    """Default subcommand and vector values with a leading minus:
+    ``--camera-position -1,2,3`` becomes ``--camera-position=-1,2,3``."""
+    out: list[str] = []
+    i = 0
+    while i < len(argv):
+        a = argv[i]
+        if a in VECTOR_OPTIONS and i + 1 < len(argv) and argv[i + 1].startswith("-") and argv[i + 1][1:2] not in ("-", ""):
+            out.append(f"{a}={argv[i + 1]}")
+            i += 2
+            continue
+        out.append(a)
+        i += 1
+    first = next((a for a in out if not a.startswith("-")), None)
+    wants_top_level = any(a in ("-h", "--help", "--version") for a in out) and first is None
+    if not wants_top_level and (first is None or first not in SUBCOMMANDS):
+        out = ["view", *out]
+    return out
+
+
+# ---------------------------------------------------------------- commands
+
+
+def _load(args) -> "object":
+    from .scene import load_scene, with_overrides
+
+    scene = load_scene(args.scene)
+    overrides = {k: getattr(args, k, None) for k in ("samples", "max_depth", "min_weight", "camera_position",
+                                                      "camera_target", "fov", "light_position")}
+    return with_overrides(scene, **overrides)
+
+
+def _progress_bar(label: str):
+    if not sys.stderr.isatty():
+        return None
+    start = time.perf_counter()
+
+    def show(done: int, total: int) -> None:
+        frac = done / total
+        bar = "#" * int(30 * frac)
+        elapsed = time.perf_counter() - start
+        eta = elapsed / frac - elapsed if frac > 0 else 0.0
+        sys.stderr.write(f"\r{label} [{bar:<30}] {100 * frac:5.1f}%  {elapsed:5.1f}s  eta {eta:5.1f}s")
+        if done == total:
+            sys.stderr.write("\n")
+        sys.stderr.flush()
+    return show
+
+
+def cmd_render(args) -> int:
+    from .imageio import OUTPUT_EXTENSIONS, write_image
+
+    out = Path(args.output)
+    if out.suffix.lower() not in OUTPUT_EXTENSIONS:
+        raise UsageError(f"{args.output}: unknown output extension {out.suffix or '(none)'!r} "
+                         f"(expected .png, .npy or .pfm)")
+    scene = _load(args)
+    parent = out.parent if str(out.parent) else Path(".")
+    if not parent.is_dir():
+        raise Failure(f"{args.output}: cannot write: folder {parent} does not exist")
+    if not os.access(parent, os.W_OK):
+        raise Failure(f"{args.output}: cannot write: folder {parent} is not writable")
+
+    from .context import ContextError, create_offscreen_context
+    from .renderer import Renderer
+
+    try:
+        ctx, backend = create_offscreen_context(args.backend)
+    except ContextError as e:
+        raise Failure(str(e)) from e
+    w, h = args.size
+    samples = scene.render.samples
+    renderer = Renderer(ctx, scene)
+    try:
+        image = renderer.render(w, h, samples, args.seed, progress=_progress_bar(f"render {w}x{h}"))
+        if args.timing:
+            times = renderer.time_render(w, h, samples, args.repeat, args.seed)
+            med = statistics.median(times)
+            print(f"render: {med:.1f} ms per frame (median of {args.repeat}, {w}x{h}, {samples} samples)",
+                  file=sys.stderr)
+    finally:
+        renderer.release()
+        ctx.release()
+    try:
+        write_image(out, image)
+    except OSError as e:
+        raise Failure(f"{args.output}: cannot write: {e.strerror or e}") from e
+    return 0
+
+
+def cmd_check(args) -> int:
+    from .scene import load_scene
+
+    scene = load_scene(args.scene)
+    print(scene.summary())
+    return 0
+
+
+def cmd_view(args) -> int:
+    if not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        raise Failure("no display: the viewer needs a window (DISPLAY is not set). "
+                      "Render offscreen instead: glassray render -o out.png")
+    _load(args)  # a bad scene is exit 2 even here
+    try:
+        from . import app  # noqa: F401
+    except ImportError:
+        raise Failure("the interactive viewer is not part of this build yet; "
+                      "render offscreen instead: glassray render -o out.png") from None
+    return app.run(args)
+
+
+def cmd_not_built(args) -> int:
+    raise Failure(f"glassray {args.command}: not built yet in this version")
+
+
+COMMANDS = {"view": cmd_view, "render": cmd_render, "check": cmd_check,
+            "bench": cmd_not_built, "stress": cmd_not_built}
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    parser = build_parser()
+    args = parser.parse_args(normalise_argv(argv))
+    if args.command is None:
+        parser.print_help()
+        return 0
+    from .scene import SceneError
+    from .shaders import ShaderError
+
+    try:
+        return COMMANDS[args.command](args)
+    except (SceneError, UsageError) as e:
+        print(f"glassray: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("glassray: interrupted", file=sys.stderr)
+        return 130
+    except (Failure, ShaderError) as e:
+        if args.debug:
+            raise
+        print(f"glassray: {e}", file=sys.stderr)
+        return 1
+    except Exception as e:  # anything unexpected: still one line, traceback with --debug
+        if args.debug:
+            raise
+        print(f"glassray: {type(e).__name__}: {e} (run with --debug for the traceback)", file=sys.stderr)
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
