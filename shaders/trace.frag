@@ -199,7 +199,11 @@ vec3 shadeLocal(Material m, Surface s, vec3 p, vec3 n, vec3 v, uint mask) {
             vec3 vis = shadowTransmittance(p, l, dist, mask);
             if (maxComponent(vis) <= 0.0) continue;
             vec3 r = 2.0 * ndl * n - l;
-            float spec = ks > 0.0 ? ks * pow(max(0.0, dot(r, v)), m.phong.z) : 0.0;
+            // max(0, r.v)^p; pow() of a tiny or denormal base returns garbage
+            // on some drivers (llvmpipe gave 2^63), and below 1e-6 the term is
+            // far under one display step anyway.
+            float rv = dot(r, v);
+            float spec = (ks > 0.0 && rv > 1e-6) ? ks * pow(min(rv, 1.0), m.phong.z) : 0.0;
             lit += light.radiance.rgb * vis * (kd * ndl + spec);
         }
     }

@@ -220,7 +220,10 @@ def _float(ctx: _Ctx, path: str, v: Any, *, lo: float | None = None, hi: float |
            lo_open: bool = False, hi_open: bool = False) -> float:
     if isinstance(v, bool) or not isinstance(v, (int, float)):
         raise ctx.fail(path, f"expected a number, got {_typename(v)}")
-    x = float(v)
+    try:
+        x = float(v)
+    except OverflowError:  # a TOML integer too large for a double
+        raise ctx.fail(path, "expected a finite number, got an integer too large for a float") from None
     if not math.isfinite(x):
         raise ctx.fail(path, f"expected a finite number, got {v}")
     if lo is not None and (x <= lo if lo_open else x < lo):
@@ -283,7 +286,7 @@ def validate_camera(cam: Camera, ctx: _Ctx | None = None) -> None:
     """position != target, and the view is not within 0.01 degrees of +-y."""
     ctx = ctx or _Ctx("camera")
     f = [t - p for t, p in zip(cam.target, cam.position)]
-    n = math.sqrt(sum(c * c for c in f))
+    n = math.hypot(*f)  # no overflow of the squares for large finite coordinates
     if n == 0.0 or not math.isfinite(n):
         raise ctx.fail("camera.target", "must differ from camera.position")
     cos_up = abs(f[1]) / n
@@ -549,7 +552,7 @@ def load_scene(spec: str | os.PathLike | None = None) -> Scene:
         raise SceneError(f"{source}: not UTF-8 text ({e.reason} at byte {e.start})") from None
     try:
         data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as e:
+    except (ValueError, RecursionError) as e:  # TOMLDecodeError; an integer too long to convert; deep nesting
         raise SceneError(f"{source}: not valid TOML: {e}") from None
     scene = scene_from_dict(data, source=source, base_dir=path.parent.resolve(), default_name=path.stem)
     scene.path = path

@@ -1,0 +1,59 @@
+"""Shared fixtures: one EGL context for the session (real rendering on
+Mesa's llvmpipe on CI), golden-image options, and small scene builders."""
+
+from __future__ import annotations
+
+import copy
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+GOLDEN_DIR = Path(__file__).parent / "goldens"
+FAILURE_DIR = Path(__file__).parent / "_failures"
+
+
+def pytest_addoption(parser):
+    parser.addoption("--update-goldens", action="store_true", default=False,
+                     help="rewrite tests/goldens/*.png from the current renderer")
+
+
+@pytest.fixture(scope="session")
+def update_goldens(request) -> bool:
+    return request.config.getoption("--update-goldens")
+
+
+@pytest.fixture(scope="session")
+def gl():
+    from viewer.context import create_offscreen_context
+
+    ctx, _backend = create_offscreen_context("egl")
+    yield ctx
+    ctx.release()
+
+
+@pytest.fixture
+def render(gl):
+    """render(scene, w, h, samples=1, seed=0) -> (H, W, 3) float32 linear."""
+    from viewer.renderer import Renderer
+
+    made = []
+
+    def _render(scene, w=96, h=54, samples=1, seed=0):
+        r = Renderer(gl, scene)
+        made.append(r)
+        return r.render(w, h, samples, seed)
+
+    yield _render
+    for r in made:
+        r.release()
+
+
+def make_scene(doc: dict, name: str = "test"):
+    from viewer.scene import scene_from_dict
+
+    return scene_from_dict(copy.deepcopy(doc), source=f"<{name}>", default_name=name)
+
+
+def mean_abs(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.mean(np.abs(np.asarray(a, np.float64) - np.asarray(b, np.float64))))
