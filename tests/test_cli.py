@@ -1,0 +1,207 @@
+"""The command line as users and outside checks drive it (shared/spec/cli.md):
+exit codes, output formats and their orientation, overrides, messages."""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from viewer.imageio import read_pfm, to_display8
+
+
+def glassray(*args, cwd=None, env=None):
+    e = dict(os.environ)
+    e.update(env or {})
+    return subprocess.run([sys.executable, "-m", "viewer", *map(str, args)], capture_output=True, text=True,
+                          cwd=cwd, env=e, timeout=300)
+
+
+@pytest.fixture(scope="module")
+def outputs(tmp_path_factory):
+    """The default scene at 40x24 as npy, pfm and png (samples 1)."""
+    d = tmp_path_factory.mktemp("out")
+    for ext in ("npy", "pfm", "png"):
+        r = glassray("render", "-o", d / f"img.{ext}", "--size", "40x24", "--samples", "1")
+        assert r.returncode == 0, r.stderr
+    return d
+
+
+def test_npy_is_float32_hxwx3_top_row_first(outputs):
+    img = np.load(outputs / "img.npy")
+    assert img.dtype == np.float32 and img.shape == (24, 40, 3)
+    # top row is sky (gradient toward zenith: blue > red), bottom row is floor (grey)
+    top, bottom = img[0].mean(axis=0), img[-1].mean(axis=0)
+    assert top[2] > top[0] + 0.05
+    assert abs(bottom[2] - bottom[0]) < 0.02
+
+
+def test_pfm_is_the_same_data_stored_bottom_to_top(outputs):
+    raw = (outputs / "img.pfm").read_bytes()
+    assert raw.startswith(b"PF\n40 24\n-1.0\n")
+    body = np.frombuffer(raw[len(b"PF\n40 24\n-1.0\n"):], "<f4").reshape(24, 40, 3)
+    npy = np.load(outputs / "img.npy")
+    np.testing.assert_array_equal(body[::-1], npy)   # first stored row = bottom of the image
+    np.testing.assert_array_equal(read_pfm(outputs / "img.pfm"), npy)
+
+
+def test_png_is_the_srgb_encoding_of_the_linear_image(outputs):
+    png = np.asarray(Image.open(outputs / "img.png"))
+    assert png.dtype == np.uint8 and png.shape == (24, 40, 3)
+    npy = np.load(outputs / "img.npy")
+    # the spec's encoding, computed independently here
+    x = np.clip(npy.astype(np.float64), 0, 1)
+    srgb = np.where(x <= 0.0031308, 12.92 * x, 1.055 * x ** (1 / 2.4) - 0.055)
+    expect = np.round(255 * srgb).astype(np.uint8)
+    assert np.array_equal(png, expect)
+    assert np.array_equal(to_display8(npy), expect)
+
+
+def test_timing_prints_the_median_line(tmp_path):
+    r = glassray("render", "-o", tmp_path / "t.png", "--size", "16x16", "--samples", "1", "--timing",
+                 "--repeat", "3")
+    assert r.returncode == 0, r.stderr
+    assert re.search(r"^render: \d+\.\d ms per frame \(median of 3, 16x16, 1 samples\)$", r.stderr, re.M)
+    assert (tmp_path / "t.png").is_file()
+
+
+def test_overrides_change_the_image_and_leading_minus_vectors_work(tmp_path):
+    a, b = tmp_path / "a.npy", tmp_path / "b.npy"
+    assert glassray("render", "-o", a, "--size", "24x16", "--samples", "1").returncode == 0
+    r = glassray("render", "-o", b, "--size", "24x16", "--samples", "1", "--camera-position", "-3.2,2.2,4.6")
+    assert r.returncode == 0, r.stderr
+    r2 = glassray("render", "-o", tmp_path / "c.npy", "--size", "24x16", "--samples", "1",
+                  "--camera-position=-3.2,2.2,4.6")
+    assert r2.returncode == 0, r2.stderr
+    assert not np.array_equal(np.load(a), np.load(b))
+    np.testing.assert_array_equal(np.load(b), np.load(tmp_path / "c.npy"))
+
+
+def test_same_seed_same_image(tmp_path):
+    for name in ("a", "b"):
+        assert glassray("render", "glass-sphere", "-o", tmp_path / f"{name}.npy", "--size", "24x16",
+                        "--samples", "4", "--seed", "7").returncode == 0
+    np.testing.assert_array_equal(np.load(tmp_path / "a.npy"), np.load(tmp_path / "b.npy"))
+
+
+@pytest.mark.parametrize("args", [
+    ["render", "-o", "x.bmp"],                                   # unknown extension
+    ["render", "-o", "x"],                                       # no extension
+    ["render", "no-such-scene.toml", "-o", "x.png"],             # missing scene
+    ["render", "-o", "x.png", "--size", "0x10"],
+    ["render", "-o", "x.png", "--size", "banana"],
+    ["render", "-o", "x.png", "--samples", "0"],
+    ["render", "-o", "x.png", "--max-depth", "65"],
+    ["render", "-o", "x.png", "--min-weight", "2"],
+    ["render", "-o", "x.png", "--fov", "180"],
+    ["render", "-o", "x.png", "--camera-position", "1,2"],
+    ["render", "-o", "x.png", "--camera-position", "1,2,nan"],
+    ["render", "-o", "x.png", "--camera-target", "3.2,2.2,4.6"],  # target == position
+    ["render", "whitted-exact", "-o", "x.png", "--light-position", "1,2,3"],  # no point light
+    ["render", "-o", "x.png", "--backend", "vulkan"],
+    ["render"],                                                  # -o is required
+    ["render", "-o", "x.png", "--bogus"],
+    ["check", "no-such-scene.toml"],
+])
+def test_bad_usage_exits_2_with_one_message(tmp_path, args):
+    r = glassray(*args, cwd=tmp_path)
+    assert r.returncode == 2, (r.stdout, r.stderr)
+    assert "Traceback" not in r.stderr
+    assert r.stderr.strip()
+    assert not (tmp_path / "x.png").exists()
+
+
+def test_invalid_scene_exits_2_naming_file_and_key(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text('[[objects]]\ntype = "sphere"\ncenter = [0, 0, 0]\nradius = -1\nmaterial = "m"\n'
+                   '[materials.m]\n')
+    for cmd in (["check", bad], ["render", bad, "-o", tmp_path / "x.png"]):
+        r = glassray(*cmd)
+        assert r.returncode == 2
+        assert str(bad) in r.stderr and "objects[0].radius" in r.stderr
+        assert "Traceback" not in r.stderr and len(r.stderr.strip().splitlines()) == 1
+
+
+def test_unwritable_output_exits_1_and_keeps_old_files(tmp_path):
+    r = glassray("render", "-o", tmp_path / "missing" / "x.png", "--size", "8x8")
+    assert r.returncode == 1 and "Traceback" not in r.stderr
+    # an existing output that cannot be replaced is left as it was
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    old = ro / "x.png"
+    old.write_bytes(b"old")
+    ro.chmod(0o500)
+    try:
+        if os.access(ro, os.W_OK):  # root ignores permissions
+            pytest.skip("running as root: permissions do not stop writes")
+        r = glassray("render", "-o", old, "--size", "8x8")
+        assert r.returncode == 1
+        assert old.read_bytes() == b"old"
+    finally:
+        ro.chmod(0o700)
+
+
+def test_output_write_is_atomic(tmp_path, monkeypatch):
+    # A failing write (simulated at the rename) leaves the old file untouched
+    # and no temporary file behind.
+    from viewer import imageio, scene as scene_mod
+
+    out = tmp_path / "img.npy"
+    out.write_bytes(b"precious")
+
+    def boom(*a, **k):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(scene_mod.os, "replace", boom)
+    with pytest.raises(OSError):
+        imageio.write_image(out, np.zeros((2, 2, 3), np.float32))
+    assert out.read_bytes() == b"precious"
+    assert [p.name for p in tmp_path.iterdir()] == ["img.npy"]
+
+
+def test_check_prints_a_one_line_summary():
+    r = glassray("check")
+    assert r.returncode == 0
+    line = r.stdout.strip()
+    assert len(line.splitlines()) == 1
+    assert "5 objects" in line and "dielectric" in line and "absorption" in line
+    r = glassray("check", "mirror-ball")
+    assert r.returncode == 0 and "dielectric" not in r.stdout and "reflection" in r.stdout
+
+
+def test_every_subcommand_has_help():
+    for sub in ("view", "render", "check", "bench", "stress"):
+        r = glassray(sub, "--help")
+        assert r.returncode == 0 and "usage:" in r.stdout
+    assert glassray("--help").returncode == 0
+
+
+def test_view_without_display_fails_with_a_hint():
+    env = {"DISPLAY": "", "WAYLAND_DISPLAY": ""}
+    for args in ([], ["view"]):
+        r = glassray(*args, env=env)
+        assert r.returncode == 1
+        assert "glassray render" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_python_dash_m_and_console_script_agree():
+    script = Path(sys.executable).parent / "glassray"
+    if not script.exists():
+        pytest.skip("console script not installed in this environment")
+    r = subprocess.run([str(script), "check"], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0 and r.stdout == glassray("check").stdout
+
+
+def test_osmesa_backend_renders_the_same_image(tmp_path):
+    a, b = tmp_path / "egl.npy", tmp_path / "osmesa.npy"
+    assert glassray("render", "-o", a, "--size", "32x18", "--samples", "1", "--backend", "egl").returncode == 0
+    r = glassray("render", "-o", b, "--size", "32x18", "--samples", "1", "--backend", "osmesa")
+    assert r.returncode == 0, r.stderr
+    # both are Mesa llvmpipe: the same compiler, so (nearly) the same numbers
+    assert np.max(np.abs(np.load(a) - np.load(b))) < 1e-4
