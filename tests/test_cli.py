@@ -165,6 +165,15 @@ def test_output_write_is_atomic(tmp_path, monkeypatch):
     assert [p.name for p in tmp_path.iterdir()] == ["img.npy"]
 
 
+def test_outputs_get_ordinary_file_permissions(outputs):
+    # atomic writes go through a private temporary file; the result must not
+    # stay private (0600) but get the mode a plain write would give
+    umask = os.umask(0)
+    os.umask(umask)
+    for ext in ("npy", "pfm", "png"):
+        assert (outputs / f"img.{ext}").stat().st_mode & 0o777 == 0o666 & ~umask
+
+
 def test_check_prints_a_one_line_summary():
     r = glassray("check")
     assert r.returncode == 0
