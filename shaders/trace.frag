@@ -69,10 +69,10 @@ bool nextInteraction(vec3 o, vec3 d, inout uint mask, inout vec3 atten, out Inte
     for (int pass = 0; pass < 2 * NUM_OBJECTS + 2; ++pass) {
         float tmin = surfaceEps(o);
         float tk[OBJECTS_LEN];
-        vec3 nk[OBJECTS_LEN];
         float tNear = INF;
+        vec3 unused;
         for (int k = 0; k < NUM_OBJECTS; ++k) {
-            tk[k] = hitObject(k, o, d, tmin, INF, nk[k]);
+            tk[k] = hitObject(k, o, d, tmin, INF, unused);
             tNear = min(tNear, tk[k]);
         }
         vec3 a = absorptionOf(mediumOf(mask));
@@ -88,7 +88,8 @@ bool nextInteraction(vec3 o, vec3 d, inout uint mask, inout vec3 atten, out Inte
             if (objects[k].info.w < 0 && tk[k] <= tGroup && tk[k] < tOpaque) { opaque = k; tOpaque = tk[k]; }
         if (opaque >= 0) {
             atten *= exp(-a * tOpaque);
-            it.p = o + tOpaque * d; it.n = nk[opaque]; it.object = opaque; it.dielectric = false;
+            it.p = o + tOpaque * d; it.object = opaque; it.dielectric = false;
+            hitObject(opaque, o, d, tmin, INF, it.n);
             return true;
         }
         atten *= exp(-a * tNear);
@@ -106,7 +107,8 @@ bool nextInteraction(vec3 o, vec3 d, inout uint mask, inout vec3 atten, out Inte
             }
         }
         if (mediumOf(after) != mediumOf(mask)) {
-            it.p = p; it.n = nk[first]; it.object = first; it.dielectric = true; it.maskAfter = after;
+            it.p = p; it.object = first; it.dielectric = true; it.maskAfter = after;
+            hitObject(first, o, d, tmin, INF, it.n);
             return true;
         }
         mask = after;
@@ -126,18 +128,18 @@ vec3 shadowTransmittance(vec3 p, vec3 l, float dist, uint mask) {
     for (int pass = 0; pass < 2 * NUM_OBJECTS + 2; ++pass) {
         float tmin = surfaceEps(o);
         float tk[OBJECTS_LEN];
-        vec3 nk[OBJECTS_LEN];
         float tNear = INF;
+        vec3 unused;
         for (int k = 0; k < NUM_OBJECTS; ++k) {
-            tk[k] = hitObject(k, o, l, tmin, left, nk[k]);
+            tk[k] = hitObject(k, o, l, tmin, left, unused);
+            // any opaque surface before the light blocks it: stop at the first
+            if (tk[k] < left && objects[k].info.w < 0) return vec3(0.0);
             tNear = min(tNear, tk[k]);
         }
         vec3 a = absorptionOf(mediumOf(mask));
         if (tNear >= left) return v * exp(-a * min(left, INF));
         vec3 q = o + tNear * l;
         float tGroup = tNear + surfaceEps(q);
-        for (int k = 0; k < NUM_OBJECTS; ++k)
-            if (objects[k].info.w < 0 && tk[k] <= tGroup) return vec3(0.0);   // first opaque blocker ends it
         v *= exp(-a * tNear);
 #if NUM_TRANSPARENT > 0
         vec3 probe = q + 2.0 * surfaceEps(q) * l;

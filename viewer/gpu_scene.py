@@ -23,7 +23,7 @@ SKY_TYPES = {"color": 0, "gradient": 1, "image": 2}
 AXES = {"x": 0, "y": 1, "z": 2}
 
 OBJECT_DTYPE = np.dtype([("a", "<f4", 4), ("b", "<f4", 4), ("c", "<f4", 4), ("d", "<f4", 4),
-                         ("e", "<f4", 4), ("info", "<i4", 4)])
+                         ("e", "<f4", 4), ("info", "<i4", 4), ("bound", "<f4", 4)])
 MATERIAL_DTYPE = np.dtype([("colorAmbient", "<f4", 4), ("phong", "<f4", 4), ("dielectric", "<f4", 4),
                            ("absorption", "<f4", 4), ("emission", "<f4", 4), ("checkerColor", "<f4", 4),
                            ("checkerEmission", "<f4", 4), ("checkerOffset", "<f4", 4)])
@@ -31,7 +31,7 @@ LIGHT_DTYPE = np.dtype([("vector", "<f4", 4), ("radiance", "<f4", 4)])
 MEDIUM_DTYPE = np.dtype([("index", "<i4", 4)])
 TAIL_DTYPE = np.dtype([("ambient", "<f4", 4), ("skyColor", "<f4", 4), ("skyHorizon", "<f4", 4),
                        ("skyZenith", "<f4", 4), ("params", "<f4", 4), ("iparams", "<i4", 4)])
-assert OBJECT_DTYPE.itemsize == 96 and MATERIAL_DTYPE.itemsize == 128 and LIGHT_DTYPE.itemsize == 32
+assert OBJECT_DTYPE.itemsize == 112 and MATERIAL_DTYPE.itemsize == 128 and LIGHT_DTYPE.itemsize == 32
 
 # Offsets for leaving a surface (see surfaceEps in trace.frag).
 EPS_REL = 1e-5        # of the hit point's magnitude (camera-relative)
@@ -86,6 +86,24 @@ def scene_scale(scene: Scene) -> float:
     return float(max(np.max(pts.max(axis=0) - pts.min(axis=0)), 1e-30))
 
 
+def bounding_sphere(obj: SceneObject, eye: np.ndarray) -> tuple[float, float, float, float]:
+    """Camera-relative centre and radius (padded by 1e-4 relative, so float32
+    rounding never rejects a true hit); radius -1 for the unbounded plane."""
+    if obj.type == "plane":
+        return (0.0, 0.0, 0.0, -1.0)
+    if obj.type == "sphere":
+        c, r = np.array(obj.center), obj.radius
+    elif obj.type == "box":
+        lo, hi = np.array(obj.min), np.array(obj.max)
+        c, r = (lo + hi) / 2, float(np.linalg.norm(hi - lo)) / 2   # rotation about c keeps it
+    else:
+        axis = np.zeros(3)
+        axis[AXES[obj.axis]] = 1.0
+        c = np.array(obj.base) + axis * obj.height / 2
+        r = math.hypot(obj.radius, obj.height / 2)
+    return (*(c - eye), r * (1 + 1e-4))
+
+
 @dataclass
 class PackedScene:
     block: bytes
@@ -130,6 +148,7 @@ def pack_scene(scene: Scene) -> PackedScene:
         rec = objs[k]
         tr = scene.is_transparent(o)
         rec["info"] = (OBJ_TYPES[o.type], mat_index[o.material], AXES.get(o.axis, 1), slot if tr else -1)
+        rec["bound"] = bounding_sphere(o, eye)
         if o.type == "plane":
             rec["a"][0] = o.height - eye[1]
         elif o.type == "sphere":

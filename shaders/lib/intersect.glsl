@@ -136,10 +136,24 @@ float hitCylinder(Object o, vec3 ro, vec3 rd, float tmin, float tmax, out vec3 n
     return best < tmax ? best : INF;
 }
 
+// Cheap rejection before the exact routine: can the ray meet the bounding
+// sphere anywhere in (tmin, tmax)?
+bool mayHitBound(vec4 bound, vec3 ro, vec3 rd, float tmin, float tmax) {
+    if (bound.w < 0.0) return true;
+    vec3 oc = ro - bound.xyz;
+    float b = dot(oc, rd);
+    vec3 qc = oc - b * rd;
+    float h = bound.w * bound.w - dot(qc, qc);
+    if (h < 0.0) return false;
+    h = sqrt(h);
+    return -b + h > tmin && -b - h < tmax;
+}
+
 float hitObject(int k, vec3 ro, vec3 rd, float tmin, float tmax, out vec3 n) {
     Object o = objects[k];
     int type = o.info.x;
     n = vec3(0.0);
+    if (!mayHitBound(o.bound, ro, rd, tmin, tmax)) return INF;
 #ifdef HAS_PLANE
     if (type == OBJ_PLANE) return hitPlane(o.a.x, ro, rd, tmin, tmax, n);
 #endif

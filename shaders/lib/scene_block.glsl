@@ -25,6 +25,7 @@ struct Object {
     vec4 d;
     vec4 e;
     ivec4 info;  // x: type, y: material index, z: cylinder axis (0,1,2), w: transparent slot or -1
+    vec4 bound;  // bounding sphere (centre, radius) of a bounded solid; radius < 0: unbounded (plane)
 };
 
 struct Material {
