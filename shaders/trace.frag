@@ -20,6 +20,13 @@ uniform vec3 camUp;            // up * tan(fov/2)
 
 out vec4 fragColor;
 
+#if defined(VIEW_MODE) && VIEW_MODE == 3
+int rayCount = 0;           // the cost view: rays traced for this pixel sample
+#define COUNT_RAY() (++rayCount)
+#else
+#define COUNT_RAY()
+#endif
+
 // ---------------------------------------------------------------- media
 
 // The medium is the first transparent object (lowest slot, slots follow the
@@ -65,6 +72,7 @@ struct Interaction {
 // `atten` takes the absorption of every stretch travelled; `mask` is updated
 // to the media of the last stretch.  Returns false when the ray leaves the scene.
 bool nextInteraction(vec3 o, vec3 d, inout uint mask, inout vec3 atten, out Interaction it) {
+    COUNT_RAY();
     it.p = vec3(0.0); it.n = vec3(0.0); it.object = -1; it.dielectric = false; it.maskAfter = mask;
     for (int pass = 0; pass < 2 * NUM_OBJECTS + 2; ++pass) {
         float tmin = surfaceEps(o);
@@ -122,6 +130,7 @@ bool nextInteraction(vec3 o, vec3 d, inout uint mask, inout vec3 atten, out Inte
 // opaque blocker, transparency at every transparent interaction, absorption
 // along every stretch inside a medium.
 vec3 shadowTransmittance(vec3 p, vec3 l, float dist, uint mask) {
+    COUNT_RAY();
     vec3 v = vec3(1.0);
     vec3 o = p;
     float left = dist;
@@ -266,11 +275,40 @@ vec3 radiance(vec3 origin, vec3 dir) {
     return sum;
 }
 
+#ifdef VIEW_MODE
+// Debug views (VIEW_MODE injected by the renderer):
+//   1 first hit: (t, object index, 0), t = INF and index -1 where nothing is hit
+//   2 first hit's unit outward normal (xyz), 0 where nothing is hit
+//   3 cost: the number of rays (camera, reflected, refracted, shadow) traced
+// "First hit" is the first geometric surface along the ray, whatever the media.
+vec4 firstHit(vec3 o, vec3 d) {
+    float best = INF;
+    int bestK = -1;
+    vec3 n = vec3(0.0), nk;
+    for (int k = 0; k < NUM_OBJECTS; ++k) {
+        float t = hitObject(k, o, d, 0.0, best, nk);
+        if (t < best) { best = t; bestK = k; n = nk; }
+    }
+#if VIEW_MODE == 1
+    return vec4(best, float(bestK), 0.0, 1.0);
+#else
+    return vec4(n, 1.0);
+#endif
+}
+#endif
+
 void main() {
     // Pixel (i, j): i to the right, j downward from the top row.
     vec2 ij = vec2(floor(gl_FragCoord.x), imageSize.y - 1.0 - floor(gl_FragCoord.y));
     vec2 uv = (ij + sampleOffset) / imageSize;
     vec3 dir = normalize(camForward + (2.0 * uv.x - 1.0) * camRight + (1.0 - 2.0 * uv.y) * camUp);
+#if defined(VIEW_MODE) && VIEW_MODE == 3
+    radiance(vec3(0.0), dir);
+    fragColor = vec4(float(rayCount), 0.0, 0.0, 1.0);
+#elif defined(VIEW_MODE)
+    fragColor = firstHit(vec3(0.0), dir);
+#else
     vec3 L = radiance(vec3(0.0), dir) * params.w;
     fragColor = vec4(L, 1.0);
+#endif
 }

@@ -16,6 +16,8 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
+
 SUBCOMMANDS = ("view", "render", "check", "bench", "stress")
 VECTOR_OPTIONS = ("--camera-position", "--camera-target", "--light-position")
 
@@ -126,6 +128,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--timing", action="store_true",
                    help="after a warm-up, render --repeat more times and print the median ms per frame")
     r.add_argument("--repeat", type=_int_range(1, 1000), default=5, metavar="N", help="timed renders (5)")
+    r.add_argument("--view", choices=("color", "normals", "depth", "objects", "cost"), default="color",
+                   help="what to draw: the image (color), or the first hit's normals, distance or object, "
+                        "or rays traced per pixel (cost); PNG gets a legend, .npy/.pfm the raw values")
     _add_overrides(r)
     _add_common(r)
 
@@ -216,6 +221,8 @@ def cmd_render(args) -> int:
     samples = scene.render.samples
     renderer = Renderer(ctx, scene)
     try:
+        if args.view != "color":
+            return _write_view(renderer, args.view, w, h, out)
         image = renderer.render(w, h, samples, args.seed, progress=_progress_bar(f"render {w}x{h}"))
         if args.timing:
             times = renderer.time_render(w, h, samples, args.repeat, args.seed)
@@ -229,6 +236,27 @@ def cmd_render(args) -> int:
         write_image(out, image)
     except OSError as e:
         raise Failure(f"{args.output}: cannot write: {e.strerror or e}") from e
+    return 0
+
+
+def _write_view(renderer, view: str, w: int, h: int, out: Path) -> int:
+    from .imageio import encode_npy, encode_pfm
+    from .scene import write_atomic
+    from .views import picture, raw_view
+
+    raw = raw_view(renderer, view, w, h)
+    try:
+        if out.suffix.lower() == ".png":
+            from PIL import Image
+            import io
+
+            buf = io.BytesIO()
+            Image.fromarray(np.round(255 * picture(view, raw)).astype(np.uint8)).save(buf, format="PNG")
+            write_atomic(out, buf.getvalue())
+        else:
+            write_atomic(out, encode_npy(raw) if out.suffix.lower() == ".npy" else encode_pfm(raw))
+    except OSError as e:
+        raise Failure(f"{out}: cannot write: {e.strerror or e}") from e
     return 0
 
 

@@ -45,12 +45,8 @@ class Renderer:
     def set_scene(self, scene: Scene) -> None:
         """Upload a scene; recompiles only when its feature key changes."""
         packed = pack_scene(scene)
-        key = tuple(sorted(packed.defines.items()))
-        prog = self._programs.get(key)
-        if prog is None:
-            prog = build_program(self.ctx, defines=packed.defines)
-            self._programs[key] = prog
-        self.program = prog
+        self._defines = packed.defines
+        self.program = self._program(packed.defines)
         if self._ubo is None or self._ubo.size != len(packed.block):
             if self._ubo is not None:
                 self._ubo.release()
@@ -59,6 +55,14 @@ class Renderer:
             self._ubo.write(packed.block)
         self._update_sky(scene)
         self.scene = scene
+
+    def _program(self, defines: dict) -> moderngl.Program:
+        key = tuple(sorted(defines.items()))
+        prog = self._programs.get(key)
+        if prog is None:
+            prog = build_program(self.ctx, defines=defines)
+            self._programs[key] = prog
+        return prog
 
     def _update_sky(self, scene: Scene) -> None:
         path = scene.sky.image_path if scene.sky.type == "image" else None
@@ -141,6 +145,37 @@ class Renderer:
             fbo.release()
         img = np.frombuffer(raw, dtype=np.float32).reshape(height, width, 4)[::-1, :, :3]
         return np.ascontiguousarray(img / np.float32(samples))
+
+    def first_hits(self, width: int, height: int, offset: tuple[float, float] = (0.5, 0.5)):
+        """Per pixel, the first geometric surface along the camera ray through
+        `offset`: (t (H, W) float32, inf where nothing is hit; object index
+        (H, W) int, -1 where nothing is hit; unit outward normal (H, W, 3)).
+        For comparing intersection code ray by ray with the reference."""
+        hit, normal = (self._debug_pass(mode, width, height, offset) for mode in (1, 2))
+        obj = hit[..., 1].round().astype(np.int32)
+        t = np.where(obj >= 0, hit[..., 0], np.inf).astype(np.float32)
+        return t, obj, np.ascontiguousarray(normal[..., :3])
+
+    def ray_cost(self, width: int, height: int, offset: tuple[float, float] = (0.5, 0.5)) -> np.ndarray:
+        """(H, W) rays traced per pixel (camera, reflected, refracted, shadow)."""
+        return self._debug_pass(3, width, height, offset)[..., 0].round().astype(np.int32)
+
+    def _debug_pass(self, mode: int, width: int, height: int, offset) -> np.ndarray:
+        """One sample of a VIEW_MODE variant of the shader, (H, W, 4) top row first."""
+        main = self.program
+        self.program = self._program({**self._defines, "VIEW_MODE": mode})
+        fbo = self.ctx.simple_framebuffer((width, height), components=4, dtype="f4")
+        try:
+            fbo.use()
+            fbo.clear(0.0, 0.0, 0.0, 0.0)
+            self.ctx.disable(moderngl.BLEND)
+            for rect in self.tiles(width, height):
+                self.draw_sample(width, height, offset, rect)
+            raw = fbo.read(components=4, dtype="f4")
+        finally:
+            fbo.release()
+            self.program = main
+        return np.frombuffer(raw, np.float32).reshape(height, width, 4)[::-1]
 
     def time_render(self, width: int, height: int, samples: int, repeat: int, seed: int = 0) -> list[float]:
         """Wall-clock ms of `repeat` renders after one warm-up, each finished

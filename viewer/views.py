@@ -1,0 +1,76 @@
+"""Debug views of a scene (``glassray render --view ...``): the first hit's
+normal, distance and object, and the ray cost per pixel, as pictures with a
+legend (PNG) or raw values (.npy / .pfm)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+VIEWS = ("normals", "depth", "objects", "cost")
+
+# A perceptually ordered heat map (dark blue -> purple -> orange -> yellow),
+# piecewise linear between these stops; display-space sRGB in 0..1.
+_HEAT = np.array([[0.02, 0.02, 0.15], [0.30, 0.05, 0.50], [0.75, 0.20, 0.35], [0.98, 0.55, 0.10],
+                  [0.99, 0.95, 0.55]])
+_PALETTE = np.array([[0.90, 0.30, 0.25], [0.30, 0.65, 0.95], [0.95, 0.80, 0.25], [0.45, 0.80, 0.40],
+                     [0.75, 0.45, 0.90], [0.95, 0.55, 0.20], [0.40, 0.85, 0.85], [0.85, 0.85, 0.85]])
+
+
+def heat(x: np.ndarray) -> np.ndarray:
+    """x in [0, 1] -> (..., 3) display colours."""
+    x = np.clip(np.asarray(x, np.float64), 0, 1) * (len(_HEAT) - 1)
+    i = np.minimum(np.floor(x).astype(int), len(_HEAT) - 2)
+    f = (x - i)[..., None]
+    return _HEAT[i] * (1 - f) + _HEAT[i + 1] * f
+
+
+def raw_view(renderer, view: str, width: int, height: int) -> np.ndarray:
+    """(H, W, 3) float32 raw values: normals xyz; depth t (inf: no hit);
+    object index (-1: none); rays per pixel."""
+    if view == "cost":
+        v = renderer.ray_cost(width, height).astype(np.float32)
+        return np.repeat(v[..., None], 3, axis=2)
+    t, obj, normal = renderer.first_hits(width, height)
+    if view == "normals":
+        return normal.astype(np.float32)
+    v = t if view == "depth" else obj.astype(np.float32)
+    return np.repeat(v[..., None], 3, axis=2).astype(np.float32)
+
+
+def _legend(width: int, lo: float, hi: float, unit: str) -> np.ndarray:
+    """A colour bar with its end values, 16 rows high, display colours 0..1."""
+    from PIL import Image, ImageDraw
+
+    bar = np.repeat(heat(np.linspace(0, 1, width))[None], 16, axis=0)
+    im = Image.fromarray(np.round(bar * 255).astype(np.uint8))
+    draw = ImageDraw.Draw(im)
+    left, right = f"{lo:g} {unit}", f"{hi:g} {unit}"
+    draw.text((2, 2), left, fill=(255, 255, 255))
+    tw = draw.textlength(right)
+    draw.text((width - tw - 2, 2), right, fill=(0, 0, 0))
+    return np.asarray(im, np.float64) / 255
+
+
+def picture(view: str, raw: np.ndarray) -> np.ndarray:
+    """Display-space (H', W, 3) picture in 0..1 of a raw view, with a legend
+    strip below for depth and cost."""
+    v = raw[..., 0]
+    if view == "normals":
+        hit = np.any(raw != 0, axis=2, keepdims=True)
+        return np.where(hit, 0.5 + 0.5 * raw, 0.0)
+    if view == "objects":
+        idx = v.round().astype(int)
+        out = _PALETTE[np.maximum(idx, 0) % len(_PALETTE)]
+        return np.where((idx >= 0)[..., None], out, 0.0)
+    finite = np.isfinite(v)
+    lo, hi = (float(v[finite].min()), float(v[finite].max())) if finite.any() else (0.0, 1.0)
+    if view == "cost":
+        lo = 0.0
+    if view == "depth" and lo > 0:
+        # distances span orders of magnitude (a floor to the horizon): log scale
+        norm = np.log(np.where(finite, v, lo) / lo) / max(np.log(hi / lo), 1e-12)
+    else:
+        norm = (v - lo) / max(hi - lo, 1e-12)
+    img = np.where(finite[..., None], heat(norm), 0.0)
+    unit = "rays" if view == "cost" else "(log)"
+    return np.concatenate([img, _legend(raw.shape[1], round(lo, 3), round(hi, 3), unit)], axis=0)
