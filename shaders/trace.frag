@@ -101,7 +101,7 @@ bool nextInteraction(vec3 o, vec3 d, inout uint mask, inout vec3 atten, out Inte
             return true;
         }
         atten *= exp(-a * tNear);
-#if NUM_TRANSPARENT > 0
+#ifdef HAS_DIELECTRIC
         // Which transparent solids hold the point just past the crossing.
         vec3 probe = p + 2.0 * surfaceEps(p) * d;
         uint after = mask;
@@ -150,7 +150,7 @@ vec3 shadowTransmittance(vec3 p, vec3 l, float dist, uint mask) {
         vec3 q = o + tNear * l;
         float tGroup = tNear + surfaceEps(q);
         v *= exp(-a * tNear);
-#if NUM_TRANSPARENT > 0
+#ifdef HAS_DIELECTRIC
         vec3 probe = q + 2.0 * surfaceEps(q) * l;
         uint after = mask;
         int first = -1;
@@ -196,7 +196,7 @@ Surface surfaceAt(Material m, vec3 p) {
 // E + C * (k_a A + sum_j L_j V_j [n.l > 0] (k_d n.l + k_s max(0, r.v)^p))
 vec3 shadeLocal(Material m, Surface s, vec3 p, vec3 n, vec3 v, uint mask) {
     vec3 lit = m.colorAmbient.a * ambient.rgb;
-#if NUM_LIGHTS > 0
+#ifdef HAS_LIGHTS
     float kd = m.phong.x, ks = m.phong.y;
     if (kd > 0.0 || ks > 0.0) {
         for (int j = 0; j < NUM_LIGHTS; ++j) {

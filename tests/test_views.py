@@ -46,3 +46,34 @@ def test_ray_cost_counts_camera_and_shadow_rays(gl):
     assert c[-1, 8] == 3          # camera, shadow, reflected (which escapes to the sky)
     c = cost(0.0, [])
     assert c[-1, 8] == 1
+
+
+def test_generic_shader_draws_the_same_image(gl):
+    # Specialisation must be image-neutral: the all-features shader with
+    # run-time counts gives the same picture on every built-in scene.
+    from viewer.scene import builtin_scene_names, load_scene
+
+    for name in builtin_scene_names():
+        scene = load_scene(name)
+        imgs = []
+        for specialise in (True, False):
+            r = Renderer(gl, scene, specialise=specialise)
+            try:
+                imgs.append(r.render(64, 36, 1))
+            finally:
+                r.release()
+        assert np.max(np.abs(imgs[0] - imgs[1])) < 1e-4, name
+
+
+def test_schlick_option_changes_dielectric_images_only(gl):
+    from viewer.scene import load_scene
+
+    def img(name, fresnel):
+        r = Renderer(gl, load_scene(name), fresnel=fresnel)
+        try:
+            return r.render(48, 27, 1)
+        finally:
+            r.release()
+
+    assert np.max(np.abs(img("default", "exact") - img("default", "schlick"))) > 1e-3
+    assert np.array_equal(img("mirror-ball", "exact"), img("mirror-ball", "schlick"))

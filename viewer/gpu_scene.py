@@ -30,7 +30,13 @@ MATERIAL_DTYPE = np.dtype([("colorAmbient", "<f4", 4), ("phong", "<f4", 4), ("di
 LIGHT_DTYPE = np.dtype([("vector", "<f4", 4), ("radiance", "<f4", 4)])
 MEDIUM_DTYPE = np.dtype([("index", "<i4", 4)])
 TAIL_DTYPE = np.dtype([("ambient", "<f4", 4), ("skyColor", "<f4", 4), ("skyHorizon", "<f4", 4),
-                       ("skyZenith", "<f4", 4), ("params", "<f4", 4), ("iparams", "<i4", 4)])
+                       ("skyZenith", "<f4", 4), ("params", "<f4", 4), ("iparams", "<i4", 4),
+                       ("counts", "<i4", 4)])
+
+# Array sizes of the GENERIC shader (all features, counts read at run time);
+# its uniform block stays under the 64 KiB that llvmpipe and most GPUs allow.
+GENERIC_LENS = {"OBJECTS_LEN": 64, "MATERIALS_LEN": 64, "LIGHTS_LEN": 16, "MEDIA_LEN": 32}
+GENERIC_STACK = 65
 assert OBJECT_DTYPE.itemsize == 112 and MATERIAL_DTYPE.itemsize == 128 and LIGHT_DTYPE.itemsize == 32
 
 # Offsets for leaving a surface (see surfaceEps in trace.frag).
@@ -111,19 +117,27 @@ class PackedScene:
     eye: np.ndarray  # world position of the eye (float64)
 
 
-def shader_defines(scene: Scene) -> dict[str, object]:
+def shader_defines(scene: Scene, specialise: bool = True, fresnel: str = "exact") -> dict[str, object]:
     """Compile-time constants of the shader for this scene: counts and the
-    features present."""
+    features present (specialise=True), or the generic all-features shader."""
+    extra: dict[str, object] = {"FRESNEL_SCHLICK": True} if fresnel == "schlick" else {}
+    if not specialise:
+        return {"GENERIC": True, **GENERIC_LENS, "STACK_SIZE": GENERIC_STACK, "HAS_LIGHTS": True,
+                "HAS_PLANE": True, "HAS_SPHERE": True, "HAS_BOX": True, "HAS_CYLINDER": True,
+                "HAS_DIELECTRIC": True, "HAS_REFLECTION": True, "HAS_SKY_IMAGE": True, **extra}
     n_obj = len(scene.objects)
     n_tr = sum(scene.is_transparent(o) for o in scene.objects)
     used = [scene.materials[o.material] for o in scene.objects]
     d: dict[str, object] = {
         "NUM_OBJECTS": n_obj, "OBJECTS_LEN": max(1, n_obj),
-        "NUM_MATERIALS": len(scene.materials), "MATERIALS_LEN": max(1, len(scene.materials)),
+        "MATERIALS_LEN": max(1, len(scene.materials)),
         "NUM_LIGHTS": len(scene.lights), "LIGHTS_LEN": max(1, len(scene.lights)),
         "NUM_TRANSPARENT": n_tr, "MEDIA_LEN": max(1, n_tr),
         "STACK_SIZE": scene.render.max_depth + 1,
+        **extra,
     }
+    if scene.lights:
+        d["HAS_LIGHTS"] = True
     for t in OBJ_TYPES:
         if any(o.type == t for o in scene.objects):
             d[f"HAS_{t.upper()}"] = True
@@ -136,7 +150,13 @@ def shader_defines(scene: Scene) -> dict[str, object]:
     return d
 
 
-def pack_scene(scene: Scene) -> PackedScene:
+def pack_scene(scene: Scene, specialise: bool = True, fresnel: str = "exact") -> PackedScene:
+    """The uniform block's bytes and the shader defines.  The generic shader
+    (specialise=False) takes the same data in arrays of fixed length."""
+    if not specialise and (len(scene.objects) > GENERIC_LENS["OBJECTS_LEN"]
+                           or len(scene.materials) > GENERIC_LENS["MATERIALS_LEN"]
+                           or len(scene.lights) > GENERIC_LENS["LIGHTS_LEN"]):
+        raise ValueError("scene too large for the generic shader")
     eye = np.array(scene.camera.position, dtype=np.float64)
     mat_index = {name: i for i, name in enumerate(scene.materials)}
 
@@ -205,9 +225,17 @@ def pack_scene(scene: Scene) -> PackedScene:
                           SKY_TYPES[scene.sky.type], 0)
 
     n_tr = slot
-    block = b"".join([objs.tobytes(), mats.tobytes(), lights.tobytes(),
-                      media[: max(1, n_tr)].tobytes(), tail.tobytes()])
-    return PackedScene(block=block, defines=shader_defines(scene), eye=eye)
+    tail["counts"][0] = (len(scene.objects), len(scene.lights), n_tr, 0)
+    media = media[: max(1, n_tr)]
+    if not specialise:
+        def pad(a: np.ndarray, n: int) -> np.ndarray:
+            out = np.zeros(n, a.dtype)
+            out[: len(a)] = a
+            return out
+        objs, mats = pad(objs, GENERIC_LENS["OBJECTS_LEN"]), pad(mats, GENERIC_LENS["MATERIALS_LEN"])
+        lights, media = pad(lights, GENERIC_LENS["LIGHTS_LEN"]), pad(media, GENERIC_LENS["MEDIA_LEN"])
+    block = b"".join([objs.tobytes(), mats.tobytes(), lights.tobytes(), media.tobytes(), tail.tobytes()])
+    return PackedScene(block=block, defines=shader_defines(scene, specialise, fresnel), eye=eye)
 
 
 def camera_uniforms(scene: Scene, width: int, height: int) -> dict[str, tuple[float, ...]]:

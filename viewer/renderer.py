@@ -28,9 +28,15 @@ DEFAULT_TILE = 512
 
 
 class Renderer:
-    def __init__(self, ctx: moderngl.Context, scene: Scene, tile: int = DEFAULT_TILE):
+    def __init__(self, ctx: moderngl.Context, scene: Scene, tile: int = DEFAULT_TILE,
+                 specialise: bool = True, fresnel: str = "exact"):
+        """specialise=False uses the generic all-features shader and
+        fresnel="schlick" Schlick's approximation: both only for comparisons
+        in the benchmark."""
         self.ctx = ctx
         self.tile = tile
+        self.specialise = specialise
+        self.fresnel = fresnel
         self._programs: dict[tuple, moderngl.Program] = {}
         self._vao_for: dict[int, moderngl.VertexArray] = {}
         self._ubo: moderngl.Buffer | None = None
@@ -44,7 +50,7 @@ class Renderer:
 
     def set_scene(self, scene: Scene) -> None:
         """Upload a scene; recompiles only when its feature key changes."""
-        packed = pack_scene(scene)
+        packed = pack_scene(scene, self.specialise, self.fresnel)
         self._defines = packed.defines
         self.program = self._program(packed.defines)
         if self._ubo is None or self._ubo.size != len(packed.block):

@@ -6,6 +6,14 @@ float fresnelDielectric(float cosI, float n1, float n2, out float cosT) {
     float sin2T = eta * eta * max(0.0, 1.0 - cosI * cosI);
     if (sin2T >= 1.0) { cosT = 0.0; return 1.0; }            // total internal reflection
     cosT = sqrt(1.0 - sin2T);
+#ifdef FRESNEL_SCHLICK
+    // Schlick's approximation, for the benchmark's comparison only (the cosine
+    // on the denser side, as usual).
+    float r0 = (n1 - n2) / (n1 + n2);
+    r0 *= r0;
+    float c = 1.0 - (n1 <= n2 ? cosI : cosT);
+    return r0 + (1.0 - r0) * c * c * c * c * c;
+#endif
     float rs = (n1 * cosI - n2 * cosT) / (n1 * cosI + n2 * cosT);
     float rp = (n1 * cosT - n2 * cosI) / (n1 * cosT + n2 * cosI);
     return 0.5 * (rs * rs + rp * rp);

@@ -3,11 +3,17 @@
 // never inserts padding.  All positions are camera-relative (the eye is at
 // the origin; the shift is done in float64 on the CPU).
 //
-// Compile-time constants injected by viewer/shaders.py:
-//   NUM_OBJECTS, NUM_MATERIALS, NUM_LIGHTS, NUM_TRANSPARENT (counts, may be 0)
+// Compile-time constants injected by viewer/gpu_scene.py (shader_defines):
+//   NUM_OBJECTS, NUM_LIGHTS, NUM_TRANSPARENT (counts, may be 0)
 //   OBJECTS_LEN, MATERIALS_LEN, LIGHTS_LEN, MEDIA_LEN (array sizes, >= 1)
 //   STACK_SIZE (ray-tree stack: max_depth + 1 entries suffice for a
 //   depth-first walk that pushes at most two children per node)
+//   HAS_PLANE/SPHERE/BOX/CYLINDER, HAS_LIGHTS, HAS_DIELECTRIC,
+//   HAS_REFLECTION, HAS_SKY_IMAGE: the features the scene uses; code for
+//   the others is not compiled.
+// GENERIC (the all-features shader the benchmark compares against): every
+// feature compiled in, arrays at their maximum sizes, counts read at run
+// time from `counts`.
 
 #define OBJ_PLANE 0
 #define OBJ_SPHERE 1
@@ -55,6 +61,13 @@ layout(std140) uniform SceneBlock {
     vec4 skyZenith;
     vec4 params;              // x: epsAbs, y: epsRel, z: minWeight, w: exposure
     ivec4 iparams;            // x: maxDepth, y: initial medium mask (uint bits), z: sky type, w: unused
+    ivec4 counts;             // objects, lights, transparent objects, unused
 };
+
+#ifdef GENERIC
+#define NUM_OBJECTS counts.x
+#define NUM_LIGHTS counts.y
+#define NUM_TRANSPARENT counts.z
+#endif
 
 uniform sampler2D skyImage;
