@@ -139,12 +139,30 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("scene", nargs="?", metavar="SCENE")
     _add_common(c)
 
-    for name, text in (("bench", "speed against error benchmark"), ("stress", "numerical stability suite")):
-        b = sub.add_parser(name, help=f"{text} (not built yet)", description=f"The {text}: not built yet.")
-        if name == "bench":
+    # bench and stress own their options (viewer/bench.py, viewer/stress.py:
+    # add_arguments(parser) and run(args) -> exit status).
+    for name, text in (("bench", "the speed-against-error benchmark"), ("stress", "the numerical stability suite")):
+        mod = _optional_module(name)
+        b = sub.add_parser(name, help=text, description=(mod.__doc__ or text).strip().splitlines()[0]
+                           if mod else f"{text} (not built yet)")
+        if mod is not None:
+            mod.add_arguments(b)
+        elif name == "bench":
             b.add_argument("scene", nargs="?", metavar="SCENE")
         _add_common(b)
     return parser
+
+
+def _optional_module(name: str):
+    import importlib
+
+    try:
+        mod = importlib.import_module(f"viewer.{name}")
+    except ModuleNotFoundError as e:
+        if e.name != f"viewer.{name}":
+            raise
+        return None
+    return mod if hasattr(mod, "add_arguments") and hasattr(mod, "run") else None
 
 
 def normalise_argv(argv: list[str]) -> list[str]:
@@ -281,12 +299,15 @@ def cmd_view(args) -> int:
     return app.run(args)
 
 
-def cmd_not_built(args) -> int:
-    raise Failure(f"glassray {args.command}: not built yet in this version")
+def cmd_module(args) -> int:
+    mod = _optional_module(args.command)
+    if mod is None:
+        raise Failure(f"glassray {args.command}: not built yet in this version")
+    return mod.run(args)
 
 
 COMMANDS = {"view": cmd_view, "render": cmd_render, "check": cmd_check,
-            "bench": cmd_not_built, "stress": cmd_not_built}
+            "bench": cmd_module, "stress": cmd_module}
 
 
 def main(argv: list[str] | None = None) -> int:
