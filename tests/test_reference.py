@@ -230,7 +230,7 @@ def test_rotated_box_signs():
     tip = rot(ang) @ [3.0, 0, 0]
     t, _, _ = first_hit(s, *rays(tip * 2, -tip))
     assert abs(t[0] - 3.0) < 0.02
-    wrong = rot([0, 0, ang[2]]) @ rot([0, ang[1], 0]).T @ rot([ang[0], 0, 0]) @ [3.0, 0, 0]
+    wrong = rot([ang[0], 0, 0]) @ rot([0, ang[1], 0]) @ rot([0, 0, ang[2]]) @ [3.0, 0, 0]  # z first
     assert np.linalg.norm(wrong - tip) > 0.5  # the check above distinguishes the order
 
 
@@ -315,7 +315,7 @@ def test_vessel_inner_and_outer(axis):
     t, idx, n = first_hit(s, O, D)
     assert np.allclose(t, [5 - r, 0.97 - (r - w), r - w, 5 - w, 5 - hgt, 2, w - 0.03])
     # outward normals of the solid: the inner surfaces face into the hole
-    assert np.allclose(n, [p, p, -p, e, e, -e, e])
+    assert np.allclose(n, [p, -p, -p, e, e, -e, e])
     inside = [base + 0.5 * e + 0.97 * p, base + 0.03 * e, base + 0.5 * e, base + 2.39 * e + 0.97 * p,
               base + 2.41 * e + 0.97 * p, base + 0.5 * e + 1.01 * p]
     assert list(contains(s.objects[0], inside)) == [True, True, False, True, False, False]
@@ -438,6 +438,19 @@ def test_phong_and_shadows_through_media():
     assert np.allclose(trace(s3, *rays([0, 0.5, 0], [0, -1, 0]))[0], want, atol=1e-12)
 
 
+def test_phong_off_peak():
+    # the specular lobe max(0, r.v)^p away from the mirror direction, and 0 behind it
+    mats = {"floor": {"color": [1.0, 0.5, 0.25], "ambient": 0, "diffuse": 0.3, "specular": 0.6,
+                      "shininess": 10}}
+    C = np.array([1.0, 0.5, 0.25])
+    for light, view, nl, rv in [([-2, 1, 0], [1, 1, 0], 1 / math.sqrt(5), 3 / math.sqrt(10)),
+                                ([-4, 1, 0], [-1, 1, 0], 1 / math.sqrt(17), 0.0)]:
+        s = make_scene([{"type": "plane", "material": "floor"}], mats,
+                       lights=[{"type": "point", "position": light}])
+        L = trace(s, *rays(view, -np.array(view, dtype=float)))[0]
+        assert np.allclose(L, C * (0.3 * nl + 0.6 * rv ** 10), atol=1e-12)
+
+
 def test_checker_parity_and_emission():
     mats = {"f": {"color": [0, 0, 0], "ambient": 0, "diffuse": 0, "emission": [0.9, 0.9, 0.9],
                   "checker": {"color": [0, 0, 0], "size": 0.5}},
@@ -492,7 +505,9 @@ def test_clear_media_of_ior_one_vanish():
     b = render_reference(without, 64, 36, samples=1)
     assert np.max(np.abs(a - b)) < 1e-9
     # and they do not vanish with the real materials (the test can fail)
-    c = render_reference(base, 64, 36, samples=1)
+    real = load_scene("default")
+    real.render.max_depth = 32
+    c = render_reference(real, 64, 36, samples=1)
     assert np.max(np.abs(c - b)) > 0.1
 
 
@@ -501,7 +516,7 @@ def test_furnace_clear_sphere_shows_only_the_sky():
     s = make_scene([{"type": "sphere", "center": [0, 0, 0], "radius": 1.0, "material": "g"}],
                    {"g": dict(CLEAR, color=[0, 0, 0], ior=1.5)},
                    sky={"type": "color", "color": sky}, lights=[{"type": "point", "position": [3, 3, 3]}],
-                   camera={"position": [0, 0.5, 3.5], "target": [0, 0, 0], "fov": 45},
+                   camera={"position": [0, 0.5, 3.0], "target": [0, 0, 0], "fov": 45},
                    render={"max_depth": 64, "min_weight": 1e-9})
     W, H = 40, 30
     O, D = camera_rays(s, W, H)
@@ -509,8 +524,9 @@ def test_furnace_clear_sphere_shows_only_the_sky():
     assert (idx == 0).mean() > 0.3  # the sphere fills much of the view
     img = render_reference(s, W, H, samples=1)
     err = np.abs(img - np.array(sky)).max(axis=2)
-    # cut branches: weight < 1e-9, or past depth 64 (R^63 for the most grazing pixel)
-    assert err.max() < 2e-3
+    # only cut branches are missing: each of weight < 1e-9 (depth 64 is never reached
+    # at these angles: R^63 < 1e-9)
+    assert err.max() < 1e-7
     assert np.median(err) < 1e-8
     # with a little absorption (or a (n1/n2)^2 factor) it would show
     s.materials["g"].absorption = (0.05, 0.05, 0.05)
@@ -521,9 +537,9 @@ def test_furnace_clear_sphere_shows_only_the_sky():
 def test_ball_lens_flips_the_checker(along):
     # Looking (almost) straight down at a checker edge, through a glass ball that fills
     # the view: the ball lens inverts the image, so the two sides swap.
-    target = np.array([0.0, 0.0, 0.5]) if along == "x" else np.array([0.5, 0.0, 0.0])
+    target = np.array([0.0, 0.0, 1.0]) if along == "x" else np.array([1.0, 0.0, 0.0])
     pos = target + [0.0, 10.0, 0.1]
-    mats = {"floor": dict(EMISSIVE_BLACK, emission=[1, 1, 1], checker={"color": [0, 0, 0], "size": 1.0,
+    mats = {"floor": dict(EMISSIVE_BLACK, emission=[1, 1, 1], checker={"color": [0, 0, 0], "size": 2.0,
                                                                       "emission": [0, 0, 0]}),
             "glass": dict(CLEAR, ior=1.5)}
     cam = {"position": pos.tolist(), "target": target.tolist(), "fov": 8}
@@ -541,7 +557,8 @@ def test_ball_lens_flips_the_checker(along):
         a, b = plain[: H // 3].mean(), plain[-H // 3:].mean()
         la, lb = lens[: H // 3].mean(), lens[-H // 3:].mean()
     assert a == 0.0 and b == 1.0
-    assert lb < 0.2 and la > 0.6
+    # through the lens: near-normal incidence twice, (1 - 0.04)^2 of the bright side
+    assert lb < 0.01 and abs(la - 0.96 ** 2) < 0.01
 
 
 def test_mirror_symmetric_scene_gives_a_symmetric_image():
@@ -579,7 +596,7 @@ def test_samples_average_and_exposure():
         O, D = camera_rays(s, W, H, (u, v))
         acc += trace(s, O.reshape(-1, 3), D.reshape(-1, 3)).reshape(H, W, 3)
     assert np.allclose(img, 2.0 * acc / 3, atol=1e-12)
-    assert np.allclose(render_reference(s, W, H)[..., 0].shape, (H, W))
+    assert render_reference(s, W, H, samples=2).shape == (H, W, 3)
 
 
 # --------------------------------------------------------------------------- sky images
@@ -608,6 +625,7 @@ def test_sky_image_png_bilinear_wrap(tmp_path):
     cases = [((2 + 0.5) / 8, (1 + 0.5) / 4, lin[1, 2]),                         # a texel centre
              (0.5, 0.5, lin[1:3, 3:5].mean(axis=(0, 1))),                      # -z: between 4 texels
              (0.25 / 8, (2 + 0.5) / 4, 0.25 * lin[2, 7] + 0.75 * lin[2, 0]),   # wraps in u
+             (7.75 / 8, (2 + 0.5) / 4, 0.75 * lin[2, 7] + 0.25 * lin[2, 0]),   # wraps in u
              ((3 + 0.5) / 8, 0.0001 / 4, lin[0, 3])]                           # zenith row (clamped)
     for u, v, want in cases:
         got = trace(s, np.zeros((1, 3)), np.array([_dir_for(u, v)]))[0]
