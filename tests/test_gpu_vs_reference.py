@@ -155,3 +155,49 @@ def test_first_hits_random_cameras(gl, kind, yaw, pitch, dist, fov, target_y):
            "materials": {"m": {"color": [0.5, 0.5, 0.5]}},
            "objects": [dict(_OBJECTS[kind], material="m")]}
     _compare_first_hits(gl, make_scene(doc), 40, 30)
+
+
+def _write_sky(path, kind: str):
+    # a small equirectangular picture with structure in u and v (and across
+    # the u seam) so that a wrong mapping, flip or filter shows
+    h, w = 16, 32
+    v, u = np.mgrid[0:h, 0:w]
+    img = np.stack([(u / (w - 1)), (v / (h - 1)), 0.5 + 0.5 * np.sin(2 * np.pi * u / w) * np.cos(np.pi * v / h)],
+                   axis=-1)
+    if kind == "png":
+        Image.fromarray(np.round(255 * img).astype(np.uint8)).save(path)
+    else:
+        from viewer.imageio import encode_pfm
+        Path(path).write_bytes(encode_pfm(img.astype(np.float32) * 2.0))
+
+
+@pytest.mark.parametrize("kind", ["png", "pfm"])
+def test_sky_image_matches_reference(render, tmp_path, kind):
+    sky = tmp_path / f"sky.{kind}"
+    _write_sky(sky, kind)
+    scene_file = tmp_path / "s.toml"
+    scene_file.write_text(f'''
+[camera]
+position = [0, 0.3, 0]
+target = [0.3, 0.5, -1]
+fov = 120
+[sky]
+type = "image"
+image = "sky.{kind}"
+[materials.mirror]
+color = [0, 0, 0]
+ambient = 0
+diffuse = 0
+reflectivity = 1
+[[objects]]
+type = "sphere"
+center = [0.4, 0.3, -1.2]
+radius = 0.3
+material = "mirror"
+''')
+    scene = load_scene(scene_file)
+    gpu = render(scene, 96, 54)
+    ref = reference.render_reference(scene, 96, 54, samples=1)
+    # GPU bilinear filtering weights have 8 fractional bits on llvmpipe (and
+    # most GPUs): at most 1/256 of a texel step, below one display level here
+    assert off_fraction(to_display8(gpu), to_display8(ref)) <= 0.001

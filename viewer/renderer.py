@@ -141,9 +141,12 @@ class Renderer:
             for off in offsets:
                 for rect in tiles:
                     self.draw_sample(width, height, off, rect)
+                    # Wait for each draw: the queue never holds more than one
+                    # tile, so Ctrl-C (checked between draws) stops at once and
+                    # the progress bar is truthful.
+                    ctx.finish()
                     done += 1
                     if progress is not None:
-                        ctx.finish()
                         progress(done, total)
             ctx.disable(moderngl.BLEND)
             raw = fbo.read(components=4, dtype="f4")
