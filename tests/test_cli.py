@@ -214,3 +214,21 @@ def test_osmesa_backend_renders_the_same_image(tmp_path):
     assert r.returncode == 0, r.stderr
     # both are Mesa llvmpipe: the same compiler, so (nearly) the same numbers
     assert np.max(np.abs(np.load(a) - np.load(b))) < 1e-4
+
+
+def test_ctrl_c_ends_a_long_render_cleanly(tmp_path):
+    import signal
+    import time
+
+    out = tmp_path / "long.png"
+    p = subprocess.Popen([sys.executable, "-m", "viewer", "render", "-o", str(out), "--size", "640x360",
+                          "--samples", "256"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    time.sleep(4)
+    assert p.poll() is None, "the render should still be running"
+    t0 = time.monotonic()
+    p.send_signal(signal.SIGINT)
+    _, err = p.communicate(timeout=60)
+    assert time.monotonic() - t0 < 15
+    assert p.returncode == 130
+    assert "interrupted" in err and "Traceback" not in err
+    assert not out.exists()
