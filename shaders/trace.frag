@@ -207,7 +207,9 @@ vec3 shadeLocal(Material m, Surface s, vec3 p, vec3 n, vec3 v, uint mask) {
             else { vec3 tl = light.vector.xyz - p; dist = length(tl); l = tl / dist; }
             float ndl = dot(n, l);
             if (ndl <= 0.0) continue;
-            vec3 vis = shadowTransmittance(p, l, dist, mask);
+            // Leave the surface along its normal: at a grazing light a start
+            // offset along l alone would not clear the hit point's error.
+            vec3 vis = shadowTransmittance(p + surfaceEps(p) * n, l, dist, mask);
             if (maxComponent(vis) <= 0.0) continue;
             vec3 r = 2.0 * ndl * n - l;
             // max(0, r.v)^p; pow() of a tiny or denormal base returns garbage

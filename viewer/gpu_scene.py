@@ -40,7 +40,7 @@ GENERIC_STACK = 65
 assert OBJECT_DTYPE.itemsize == 112 and MATERIAL_DTYPE.itemsize == 128 and LIGHT_DTYPE.itemsize == 32
 
 # Offsets for leaving a surface (see surfaceEps in trace.frag).
-EPS_REL = 1e-5        # of the hit point's magnitude (camera-relative)
+EPS_REL = 2e-6        # of the hit point's magnitude (camera-relative); ~16 float32 ulps
 EPS_SCENE = 1e-6      # of the scene's size
 
 

@@ -10,13 +10,41 @@ void keepNearest(float t, vec3 n, float tmin, inout float best, inout vec3 bestN
     if (t > tmin && t < best) { best = t; bestN = n; }
 }
 
+#ifdef NAIVE_INTERSECT
+// Textbook: no guard for rays parallel to the plane (t = +-inf or NaN).
+float hitPlane(float height, vec3 ro, vec3 rd, float tmin, float tmax, out vec3 n) {
+    n = vec3(0.0, 1.0, 0.0);
+    float t = (height - ro.y) / rd.y;
+    return (t > tmin && t < tmax) ? t : INF;
+}
+#else
 float hitPlane(float height, vec3 ro, vec3 rd, float tmin, float tmax, out vec3 n) {
     n = vec3(0.0, 1.0, 0.0);
     if (rd.y == 0.0) return INF;
     float t = (height - ro.y) / rd.y;
     return (t > tmin && t < tmax) ? t : INF;
 }
+#endif
 
+#ifdef NAIVE_INTERSECT
+// NAIVE_INTERSECT (measurements only, see viewer/stress.py): the textbook
+// quadratic t^2 + b t + c = 0, discriminant b^2 - 4c and roots (-b +- sqrt)/2,
+// which cancel catastrophically for distant or grazing rays.
+float hitSphere(vec3 center, float radius, vec3 ro, vec3 rd, float tmin, float tmax, out vec3 n) {
+    vec3 oc = ro - center;
+    float b = 2.0 * dot(oc, rd);
+    float c = dot(oc, oc) - radius * radius;
+    float disc = b * b - 4.0 * c;
+    n = vec3(0.0);
+    if (disc < 0.0) return INF;
+    float s = sqrt(disc);
+    float tn = 0.5 * (-b - s), tf = 0.5 * (-b + s);
+    float t = (tn > tmin) ? tn : tf;
+    if (!(t > tmin && t < tmax)) return INF;
+    n = (oc + t * rd) / radius;
+    return t;
+}
+#else
 // Roots of |o + t d - c|^2 = r^2 without cancellation: the discriminant from
 // the closest-approach vector, and the stable pair q, c/q.
 float hitSphere(vec3 center, float radius, vec3 ro, vec3 rd, float tmin, float tmax, out vec3 n) {
@@ -37,7 +65,34 @@ float hitSphere(vec3 center, float radius, vec3 ro, vec3 rd, float tmin, float t
     n = (oc + t * rd) / radius;
     return t;
 }
+#endif
 
+#ifdef NAIVE_INTERSECT
+// Textbook slabs with plain 1/d: a zero direction component gives +-inf,
+// and 0 * inf = NaN when the origin lies on that slab's plane.
+float hitBox(Object o, vec3 ro, vec3 rd, float tmin, float tmax, out vec3 n) {
+    mat3 localFromWorld = transpose(mat3(o.c.xyz, o.d.xyz, o.e.xyz));
+    vec3 p = localFromWorld * (ro - o.a.xyz);
+    vec3 d = localFromWorld * rd;
+    vec3 half_ = o.b.xyz;
+    vec3 inv = 1.0 / d;
+    vec3 t0 = (-half_ - p) * inv, t1 = (half_ - p) * inv;
+    vec3 tn = min(t0, t1), tf = max(t0, t1);
+    float tEnter = max(tn.x, max(tn.y, tn.z)), tExit = min(tf.x, min(tf.y, tf.z));
+    int axisEnter = tEnter == tn.x ? 0 : (tEnter == tn.y ? 1 : 2);
+    int axisExit = tExit == tf.x ? 0 : (tExit == tf.y ? 1 : 2);
+    n = vec3(0.0);
+    if (tEnter > tExit) return INF;
+    vec3 nl = vec3(0.0);
+    float t;
+    if (tEnter > tmin) { t = tEnter; nl[axisEnter] = -sign(d[axisEnter]); }
+    else if (tExit > tmin) { t = tExit; nl[axisExit] = sign(d[axisExit]); }
+    else return INF;
+    if (t >= tmax) return INF;
+    n = transpose(localFromWorld) * nl;
+    return t;
+}
+#else
 // Slab test in the box's own frame; zero direction components are handled
 // explicitly (no 0 * inf NaN).
 float hitBox(Object o, vec3 ro, vec3 rd, float tmin, float tmax, out vec3 n) {
@@ -71,12 +126,37 @@ float hitBox(Object o, vec3 ro, vec3 rd, float tmin, float tmax, out vec3 n) {
     n = transpose(localFromWorld) * nl;
     return t;
 }
+#endif
 
 // The cylinder's axis becomes local y by swapping two coordinates (its own inverse).
 vec3 toAxisFrame(vec3 v, int axis) {
     return axis == 0 ? v.yxz : (axis == 2 ? v.xzy : v);
 }
 
+#ifdef NAIVE_INTERSECT
+// Textbook side: a t^2 + b t + c = 0 with disc = b^2 - 4ac and roots
+// (-b +- sqrt(disc)) / 2a; no guard for rays parallel to the axis (a = 0).
+void cylinderSide(vec3 p, vec3 d, float r, float y0, float y1, bool inward, float tmin,
+                  inout float best, inout vec3 bestN) {
+    float a = d.x * d.x + d.z * d.z;
+    float b = 2.0 * (p.x * d.x + p.z * d.z);
+    float c = p.x * p.x + p.z * p.z - r * r;
+    float disc = b * b - 4.0 * a * c;
+    if (disc < 0.0) return;
+    float s = sqrt(disc);
+    float roots[2];
+    roots[0] = (-b - s) / (2.0 * a);
+    roots[1] = (-b + s) / (2.0 * a);
+    for (int i = 0; i < 2; ++i) {
+        float t = roots[i];
+        float y = p.y + t * d.y;
+        if (y >= y0 && y <= y1) {
+            vec3 nr = vec3(p.x + t * d.x, 0.0, p.z + t * d.z) / r;
+            keepNearest(t, inward ? -nr : nr, tmin, best, bestN);
+        }
+    }
+}
+#else
 // Side of an infinite cylinder of radius r about local y, both roots, the
 // hits kept when their y lies in [y0, y1].  inward: the normal points to the axis.
 void cylinderSide(vec3 p, vec3 d, float r, float y0, float y1, bool inward, float tmin,
@@ -102,7 +182,18 @@ void cylinderSide(vec3 p, vec3 d, float r, float y0, float y1, bool inward, floa
         }
     }
 }
+#endif
 
+#ifdef NAIVE_INTERSECT
+// Textbook cap: no guard for rays parallel to the cap (t = +-inf or NaN).
+void cylinderCap(vec3 p, vec3 d, float y, float rIn, float rOut, float ny, float tmin,
+                 inout float best, inout vec3 bestN) {
+    float t = (y - p.y) / d.y;
+    float x = p.x + t * d.x, z = p.z + t * d.z;
+    float rho2 = x * x + z * z;
+    if (rho2 <= rOut * rOut && rho2 >= rIn * rIn) keepNearest(t, vec3(0.0, ny, 0.0), tmin, best, bestN);
+}
+#else
 // Disc or annulus at local height y with rho in [rIn, rOut]; normal +-y.
 void cylinderCap(vec3 p, vec3 d, float y, float rIn, float rOut, float ny, float tmin,
                  inout float best, inout vec3 bestN) {
@@ -112,6 +203,7 @@ void cylinderCap(vec3 p, vec3 d, float y, float rIn, float rOut, float ny, float
     float rho2 = x * x + z * z;
     if (rho2 <= rOut * rOut && rho2 >= rIn * rIn) keepNearest(t, vec3(0.0, ny, 0.0), tmin, best, bestN);
 }
+#endif
 
 // Capped cylinder, or with wall > 0 the vessel: outer side, bottom, rim,
 // inner side and inner bottom.
@@ -136,6 +228,18 @@ float hitCylinder(Object o, vec3 ro, vec3 rd, float tmin, float tmax, out vec3 n
     return best < tmax ? best : INF;
 }
 
+#ifdef NAIVE_INTERSECT
+// Textbook bounding-sphere test: discriminant b^2 - c.
+bool mayHitBound(vec4 bound, vec3 ro, vec3 rd, float tmin, float tmax) {
+    if (bound.w < 0.0) return true;
+    vec3 oc = ro - bound.xyz;
+    float b = dot(oc, rd);
+    float h = b * b - (dot(oc, oc) - bound.w * bound.w);
+    if (h < 0.0) return false;
+    h = sqrt(h);
+    return -b + h > tmin && -b - h < tmax;
+}
+#else
 // Cheap rejection before the exact routine: can the ray meet the bounding
 // sphere anywhere in (tmin, tmax)?
 bool mayHitBound(vec4 bound, vec3 ro, vec3 rd, float tmin, float tmax) {
@@ -148,6 +252,7 @@ bool mayHitBound(vec4 bound, vec3 ro, vec3 rd, float tmin, float tmax) {
     h = sqrt(h);
     return -b + h > tmin && -b - h < tmax;
 }
+#endif
 
 float hitObject(int k, vec3 ro, vec3 rd, float tmin, float tmax, out vec3 n) {
     Object o = objects[k];
