@@ -10,6 +10,7 @@ compiler's ``0:12(3): error`` can be mapped back to ``lib/x.glsl:12``.
 
 from __future__ import annotations
 
+import os
 import re
 from dataclasses import dataclass, field
 from importlib import resources
@@ -25,7 +26,12 @@ class ShaderError(RuntimeError):
 
 def shader_root() -> Path:
     """The folder holding trace.frag (inside the installed package, or the
-    repository's shaders/ for an editable install)."""
+    repository's shaders/ for an editable install); the environment
+    variable GLASSRAY_SHADERS names another folder (shader work with F5 in
+    the viewer, tests)."""
+    override = os.environ.get("GLASSRAY_SHADERS")
+    if override:
+        return Path(override)
     try:
         root = resources.files("viewer.shaders")
         p = Path(str(root))

@@ -1,0 +1,720 @@
+"""The interactive viewer: the one module that uses GLFW.
+
+It opens the window (OpenGL 3.3 core or newer), turns GLFW's events into
+calls on :class:`viewer.controls.Controls`, runs the loop and draws with the
+shared renderer through :class:`viewer.progressive.Progressive` (previews at
+a reduced resolution while something moves, accumulation at full
+resolution when it stops, nothing at all once the scene's ``samples`` are
+reached: the loop then sleeps in ``glfw.wait_events``).  The settings panel,
+the HUD and the help overlay are Dear ImGui (imgui-bundle) widgets from
+viewer/ui.py; without imgui-bundle the viewer still runs, with the HUD in
+the window title and the help on stdout.
+"""
+
+from __future__ import annotations
+
+import copy
+import ctypes
+import math
+import os
+import sys
+import time
+from dataclasses import fields
+
+# imgui-bundle ships its own GLFW library and points the glfw package at it,
+# so it must be imported before glfw (one GLFW for both).
+_imgui = None
+IMGUI_ERROR: str | None = None
+if os.environ.get("GLASSRAY_NO_IMGUI"):
+    IMGUI_ERROR = "disabled by GLASSRAY_NO_IMGUI"
+else:
+    try:
+        from imgui_bundle import imgui as _imgui  # type: ignore[no-redef]
+    except Exception as _e:  # ImportError, or a broken binary wheel
+        _imgui = None
+        IMGUI_ERROR = f"{type(_e).__name__}: {_e}"
+
+import glfw  # noqa: E402
+import moderngl  # noqa: E402
+import numpy as np  # noqa: E402
+
+from .controls import HELP, Controls, merge_reloaded  # noqa: E402
+from .progressive import Progressive  # noqa: E402
+from .renderer import Renderer  # noqa: E402
+from .scene import Scene, SceneError  # noqa: E402
+from .screenshot import save_linear, save_rgb8  # noqa: E402
+
+#: After the last change, the view counts as still (full resolution) after this long.
+SETTLE_S = 0.12
+#: Frame time the previews aim for, ms.
+DEFAULT_TARGET_MS = 33.0
+#: While samples accumulate, the window shows the progress this often (s).
+ACCUMULATE_DISPLAY_S = 0.25
+#: An idle viewer still wakes this often (s), so that Ctrl-C in its terminal ends it.
+IDLE_WAKE_S = 0.5
+#: How long a HUD message stays.
+MESSAGE_S = 4.0
+
+_KEYS = {getattr(glfw, f"KEY_{c.upper()}"): c for c in "wsadqerph"}
+_KEYS.update({getattr(glfw, f"KEY_{d}"): str(d) for d in range(1, 10)})
+_KEYS.update({getattr(glfw, f"KEY_KP_{d}"): str(d) for d in range(1, 10)})
+_KEYS.update({glfw.KEY_TAB: "tab", glfw.KEY_F1: "f1", glfw.KEY_F5: "f5", glfw.KEY_F12: "f12",
+              glfw.KEY_ESCAPE: "escape"})
+_BUTTONS = {glfw.MOUSE_BUTTON_LEFT: "left", glfw.MOUSE_BUTTON_RIGHT: "right", glfw.MOUSE_BUTTON_MIDDLE: "middle"}
+
+
+class WindowError(RuntimeError):
+    """No window or no OpenGL 3.3 context (the CLI turns it into exit 1)."""
+
+
+def _no_window_message(detail: str) -> str:
+    disp = os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY") or "(not set)"
+    return (f"cannot open a window on display {disp}: {detail}. "
+            "Render offscreen instead: glassray render -o out.png")
+
+
+def _init_glfw() -> list[str]:
+    errors: list[str] = []
+
+    def on_error(code, desc):
+        errors.append(desc.decode("utf-8", "replace") if isinstance(desc, bytes) else str(desc))
+
+    glfw.ERROR_REPORTING = "ignore"  # reported through on_error and the checks below
+    glfw.set_error_callback(on_error)
+    if not glfw.init():
+        raise WindowError(_no_window_message(errors[-1] if errors else "GLFW could not start"))
+    return errors
+
+
+def _create_window(width: int, height: int, title: str, visible: bool, errors: list[str]):
+    glfw.default_window_hints()
+    glfw.window_hint(glfw.CONTEXT_VERSION_MAJOR, 3)
+    glfw.window_hint(glfw.CONTEXT_VERSION_MINOR, 3)
+    glfw.window_hint(glfw.OPENGL_PROFILE, glfw.OPENGL_CORE_PROFILE)
+    glfw.window_hint(glfw.OPENGL_FORWARD_COMPAT, True)
+    glfw.window_hint(glfw.SCALE_TO_MONITOR, True)
+    glfw.window_hint(glfw.VISIBLE, visible)
+    win = glfw.create_window(width, height, title, None, None)
+    if not win:
+        raise WindowError(_no_window_message(
+            f"no OpenGL 3.3 core context ({errors[-1] if errors else 'window creation failed'})"))
+    return win
+
+
+def probe(args) -> int:
+    """Exit 0 when a window with an OpenGL 3.3 core context can be opened (make run)."""
+    errors = _init_glfw()
+    try:
+        win = _create_window(64, 64, "glassray probe", False, errors)
+        glfw.make_context_current(win)
+        ctx = moderngl.create_context(require=330)
+        ctx.release()
+        glfw.destroy_window(win)
+    finally:
+        glfw.terminate()
+    return 0
+
+
+def run(args) -> int:
+    from .cli import Failure, _load
+
+    scene = _load(args)
+    try:
+        viewer = Viewer(args, scene, _load)
+    except WindowError as e:
+        raise Failure(str(e)) from None
+    try:
+        return viewer.run()
+    finally:
+        viewer.close()
+
+
+def _rss_kb() -> int:
+    try:
+        with open("/proc/self/statm") as f:
+            return int(f.read().split()[1]) * (os.sysconf("SC_PAGE_SIZE") // 1024)
+    except (OSError, ValueError, IndexError):
+        import resource
+
+        return int(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
+
+
+class Viewer:
+    def __init__(self, args, scene: Scene, loader):
+        self.args = args
+        self.loader = loader  # args -> scene (scene file plus overrides), for F5
+        self.debug = bool(getattr(args, "debug", False))
+        self.soak = int(getattr(args, "soak", 0) or 0)
+        self.imgui = _imgui
+        self.window = None
+        self.ctx = None
+        self.renderer = None
+        self.prog = None
+        self._imgui_ready = False
+        self._errors = _init_glfw()
+        try:
+            self._open(scene)
+        except BaseException:
+            self.close()
+            raise
+
+    # ------------------------------------------------------------ setup
+
+    def _open(self, scene: Scene) -> None:
+        w, h = self.args.size
+        self.window = win = _create_window(w, h, self._title(scene), True, self._errors)
+        glfw.make_context_current(win)
+        glfw.swap_interval(1 if getattr(self.args, "vsync", True) else 0)
+        try:
+            self.ctx = moderngl.create_context(require=330)
+        except Exception as e:
+            raise WindowError(_no_window_message(f"no OpenGL 3.3 context ({e})")) from None
+
+        self.scene = scene
+        self.file_scene = copy.deepcopy(scene)  # as loaded: F5 takes what changed on disk since
+        self.good_scene = copy.deepcopy(scene)  # the last scene the renderer accepted
+        self.renderer = Renderer(self.ctx, scene)
+        self.prog = Progressive(self.ctx, self.renderer, DEFAULT_TARGET_MS)
+        self.controls = Controls(scene, glfw.get_window_size(win))
+
+        self.show_panel = False
+        self.show_help = False
+        self.actions: list[str] = []
+        self.need_preview = True
+        self.needs_display = True
+        self.ui_frames = 2
+        self.last_change = time.perf_counter()
+        self.message = ""
+        self.message_until = 0.0
+        self.frame_ms = 0.0
+        self.fps = 0.0
+        self._fps_count = 0
+        self._fps_t0 = time.perf_counter()
+        self.overhead_ms = 3.0
+        self._title_t = 0.0
+        self._last_display = 0.0
+        self._overlay_layout = None
+        self._preview_frames: list[float] = []
+        self._cursor: tuple[float, float] | None = None
+        self._want_window_shot = 0  # frames to draw before F12 reads the window back
+        self.frames = 0
+        self.panel = None
+
+        self._setup_imgui()
+        self._install_callbacks()
+        if self.imgui is None:
+            print(f"glassray: the settings panel is not available ({IMGUI_ERROR}); "
+                  "install imgui-bundle for it. The HUD is in the window title.", file=sys.stderr)
+
+    def _setup_imgui(self) -> None:
+        if self.imgui is None:
+            return
+        imgui = self.imgui
+        try:
+            from .ui import Panel
+
+            imgui.create_context()
+            imgui.get_io().set_ini_filename(None)
+            imgui.style_colors_dark()
+            addr = ctypes.cast(self.window, ctypes.c_void_p).value
+            if not imgui.backends.glfw_init_for_opengl(addr, False):
+                raise RuntimeError("the ImGui GLFW backend did not start")
+            if not imgui.backends.opengl3_init("#version 330 core"):
+                imgui.backends.glfw_shutdown()
+                raise RuntimeError("the ImGui OpenGL 3 backend did not start")
+            self._addr = addr
+            self._imgui_ready = True
+            self.panel = Panel(self.scene, DEFAULT_TARGET_MS)
+        except Exception as e:
+            global IMGUI_ERROR
+            IMGUI_ERROR = f"{type(e).__name__}: {e}"
+            try:
+                imgui.destroy_context()
+            except Exception:
+                pass
+            self.imgui = None
+            self.panel = None
+
+    def _install_callbacks(self) -> None:
+        win = self.window
+        glfw.set_key_callback(win, self._on_key)
+        glfw.set_char_callback(win, self._on_char)
+        glfw.set_mouse_button_callback(win, self._on_mouse_button)
+        glfw.set_cursor_pos_callback(win, self._on_cursor_pos)
+        glfw.set_scroll_callback(win, self._on_scroll)
+        glfw.set_window_size_callback(win, self._on_window_size)
+        glfw.set_framebuffer_size_callback(win, self._on_framebuffer_size)
+        glfw.set_window_refresh_callback(win, self._on_refresh)
+        glfw.set_window_focus_callback(win, self._on_focus)
+        glfw.set_cursor_enter_callback(win, self._on_cursor_enter)
+
+    def _title(self, scene: Scene) -> str:
+        return f"glassray - {scene.name}"
+
+    # ------------------------------------------------------------ callbacks
+
+    def _ui_wants_mouse(self) -> bool:
+        return self._imgui_ready and self.imgui.get_io().want_capture_mouse
+
+    def _ui_wants_keys(self) -> bool:
+        return self._imgui_ready and self.imgui.get_io().want_text_input
+
+    def _on_key(self, win, key, scancode, action, mods):
+        if self._imgui_ready:
+            self.imgui.backends.glfw_key_callback(self._addr, key, scancode, action, mods)
+        self.ui_frames = max(self.ui_frames, 2)
+        if action == glfw.RELEASE or self._ui_wants_keys():
+            return
+        name = _KEYS.get(key)
+        if name is None:
+            return
+        act = self.controls.key(name, shift=bool(mods & glfw.MOD_SHIFT), repeat=action == glfw.REPEAT)
+        if act is not None:
+            self.actions.append(act)
+
+    def _on_char(self, win, codepoint):
+        if self._imgui_ready:
+            self.imgui.backends.glfw_char_callback(self._addr, codepoint)
+        self.ui_frames = max(self.ui_frames, 2)
+
+    def _on_mouse_button(self, win, button, action, mods):
+        if self._imgui_ready:
+            self.imgui.backends.glfw_mouse_button_callback(self._addr, button, action, mods)
+        self.ui_frames = max(self.ui_frames, 2)
+        name = _BUTTONS.get(button)
+        if name is None:
+            return
+        # the position of the latest motion event (in event order: querying the
+        # pointer now could already see a later position)
+        x, y = self._cursor if self._cursor is not None else glfw.get_cursor_pos(win)
+        if action == glfw.PRESS:
+            if not self._ui_wants_mouse():
+                self.controls.press(name, x, y, shift=bool(mods & glfw.MOD_SHIFT))
+        elif action == glfw.RELEASE:
+            self.controls.release(name, x, y)
+
+    def _on_cursor_pos(self, win, x, y):
+        self._cursor = (x, y)
+        if self._imgui_ready:
+            self.imgui.backends.glfw_cursor_pos_callback(self._addr, x, y)
+            self.ui_frames = max(self.ui_frames, 2)
+        self.controls.move(x, y)
+
+    def _on_scroll(self, win, dx, dy):
+        if self._imgui_ready:
+            self.imgui.backends.glfw_scroll_callback(self._addr, dx, dy)
+        self.ui_frames = max(self.ui_frames, 2)
+        if not self._ui_wants_mouse():
+            self.controls.scroll(dx, dy)
+
+    def _on_window_size(self, win, w, h):
+        if w > 0 and h > 0:
+            self.controls.set_window_size(w, h)
+        self.needs_display = True
+
+    def _on_framebuffer_size(self, win, w, h):
+        self.needs_display = True
+
+    def _on_refresh(self, win):
+        self.needs_display = True
+
+    def _on_focus(self, win, focused):
+        if self._imgui_ready:
+            self.imgui.backends.glfw_window_focus_callback(self._addr, int(focused))
+        self.ui_frames = max(self.ui_frames, 1)
+
+    def _on_cursor_enter(self, win, entered):
+        if self._imgui_ready:
+            self.imgui.backends.glfw_cursor_enter_callback(self._addr, int(entered))
+        self.ui_frames = max(self.ui_frames, 1)
+
+    # ------------------------------------------------------------ loop
+
+    def run(self) -> int:
+        gl_start = rss_start = None
+        warm = max(50, self.soak // 5)
+        while not glfw.window_should_close(self.window):
+            self._wait()
+            if self.soak:
+                self._soak_step()
+                if self.frames == warm:
+                    gl_start, rss_start = gl_object_counts(self.ctx, self.prog), _rss_kb()
+                if self.frames >= self.soak:
+                    break
+            self._frame()
+        if self.soak:
+            self.ctx.finish()
+            gl_end, rss_end = gl_object_counts(self.ctx, self.prog), _rss_kb()
+            moving = sorted(self._preview_frames) or [0.0]
+            print(f"soak: frames={self.frames} warmup={warm} rss_kb={rss_start}->{rss_end} "
+                  f"gl_objects={sum(gl_start.values())}->{sum(gl_end.values())} "
+                  f"moving_frame_ms_median={moving[len(moving) // 2]:.1f} "
+                  f"preview={self.prog.preview_size} detail={gl_start}->{gl_end}", flush=True)
+        return 0
+
+    def _busy(self) -> bool:
+        return bool(self.need_preview or self.controls.changed or self.actions or self.ui_frames > 0
+                    or self.needs_display or self._want_window_shot)
+
+    def _wait(self) -> None:
+        if self.soak:
+            glfw.poll_events()
+            return
+        fbw, fbh = glfw.get_framebuffer_size(self.window)
+        if fbw <= 0 or fbh <= 0:  # minimised: nothing to draw until it comes back
+            glfw.wait_events_timeout(IDLE_WAKE_S)
+            return
+        if self._busy():
+            glfw.poll_events()
+            return
+        if not self.prog.done:
+            left = self.last_change + SETTLE_S - time.perf_counter()
+            if left > 0:
+                glfw.wait_events_timeout(left)
+            else:
+                glfw.poll_events()
+            return
+        if self.message and self.message_until > time.perf_counter():
+            # idle, but a HUD message is to disappear: wake up then
+            glfw.wait_events_timeout(self.message_until - time.perf_counter() + 0.01)
+            if time.perf_counter() >= self.message_until:
+                self.message = ""
+                self.needs_display = True
+            return
+        # idle: all samples done, nothing changed.  Sleep until an event (the
+        # timeout only lets Python see a Ctrl-C now and then).
+        glfw.wait_events_timeout(IDLE_WAKE_S)
+
+    def _say(self, text: str, error: bool = False) -> None:
+        self.message = text
+        self.message_until = time.perf_counter() + MESSAGE_S
+        if error:
+            print(f"glassray: {text}", file=sys.stderr, flush=True)
+
+    def _frame(self) -> None:
+        t0 = time.perf_counter()
+        win = self.window
+        fbw, fbh = glfw.get_framebuffer_size(win)
+        if fbw <= 0 or fbh <= 0:  # minimised: only quitting makes sense
+            if "quit" in self.actions:
+                glfw.set_window_should_close(win, True)
+            self.needs_display = False
+            self.ui_frames = 0
+            self.actions.clear()
+            return
+        if (fbw, fbh) != self.prog.size:
+            self.prog.resize(fbw, fbh)
+            self.need_preview = True
+            self.last_change = t0
+
+        actions, self.actions = self.actions, []
+        want_shot = False
+        for act in actions:
+            if act == "quit":
+                glfw.set_window_should_close(win, True)
+            elif act == "toggle_panel":
+                if self.panel is not None:
+                    self.show_panel = not self.show_panel
+                else:
+                    self._say(f"no settings panel: imgui-bundle is not available ({IMGUI_ERROR})", error=True)
+            elif act == "help":
+                self.show_help = not self.show_help
+                if self.imgui is None and self.show_help:
+                    print(help_text(), flush=True)
+            elif act == "reload":
+                self.reload()
+            elif act == "screenshot":
+                want_shot = True
+            elif act == "screenshot_window":
+                # ImGui shows a window that just opened one frame later: let the
+                # overlays settle for a frame, then read the window back
+                self._want_window_shot = 2
+        if self.controls.message:
+            self._say(self.controls.message)
+            self.controls.message = ""
+
+        ui = self._imgui_ready
+        if ui:
+            imgui = self.imgui
+            imgui.backends.opengl3_new_frame()
+            imgui.backends.glfw_new_frame()
+            imgui.new_frame()
+            if self.show_panel:
+                ds = imgui.get_io().display_size
+                res = self.panel.draw(self.scene, (ds.x, ds.y))
+                if res.camera_changed:
+                    self.controls.camera_edited()
+                if res.changed:
+                    self.controls.changed = True
+                if res.target_ms_changed:
+                    self.prog.target_ms = self.panel.target_ms
+
+        if self.controls.take_changed():
+            self._apply_scene()
+            self.need_preview = True
+            self.last_change = t0
+
+        # trace: a preview right after a change, full-resolution bands once still
+        traced = previewed = False
+        if self.need_preview:
+            self.prog.render_preview(max(5.0, self.prog.target_ms - self.overhead_ms))
+            self.need_preview = False
+            traced = previewed = True
+            show_trace = True
+        elif not self.prog.done and (self.soak or t0 - self.last_change >= SETTLE_S):
+            passes = self.prog.passes_done
+            self.prog.accumulate(self.prog.target_ms)
+            traced = True
+            # progress is shown a few times a second (the display pass and the
+            # buffer swap are not free on a software renderer), and at once
+            # when a sample completes
+            show_trace = (self.prog.passes_done != passes or self.soak
+                          or t0 - self._last_display >= ACCUMULATE_DISPLAY_S)
+        else:
+            show_trace = False
+        trace_ms = self.prog.last_trace_ms if traced else 0.0
+
+        if want_shot:
+            self.screenshot()
+
+        draw = show_trace or self.needs_display or self.ui_frames > 0 or self._want_window_shot
+        if draw:
+            self.prog.display(self.ctx.screen, (0, 0, fbw, fbh))
+        if ui:
+            if draw:
+                self._draw_overlays()
+            imgui.render()
+            if draw:
+                imgui.backends.opengl3_render_draw_data(imgui.get_draw_data())
+        elif draw and (t0 - self._title_t > 0.25 or self.prog.done):
+            glfw.set_window_title(win, self._title(self.scene) + "  |  " + "  |  ".join(self._hud_lines()))
+            self._title_t = t0
+        if self._want_window_shot and draw:
+            self._want_window_shot -= 1
+            if self._want_window_shot == 0:
+                self._window_screenshot(fbw, fbh)
+        if draw:
+            glfw.swap_buffers(win)
+            self.frames += 1
+            self._last_display = time.perf_counter()
+        self.needs_display = False
+        self.ui_frames = max(0, self.ui_frames - 1)
+
+        t1 = time.perf_counter()
+        if draw:
+            self.frame_ms = (t1 - t0) * 1000.0
+            if self.soak and previewed and self.frames > 10:
+                self._preview_frames.append(self.frame_ms)
+            if traced:
+                self.overhead_ms = 0.8 * self.overhead_ms + 0.2 * max(0.0, self.frame_ms - trace_ms)
+            self._fps_count += 1
+            if t1 - self._fps_t0 >= 0.5:
+                self.fps = self._fps_count / (t1 - self._fps_t0)
+                self._fps_count, self._fps_t0 = 0, t1
+
+    def _hud_lines(self) -> list[str]:
+        rw, rh = self.prog.active_resolution
+        preview = (rw, rh) != self.prog.size
+        done, total = self.prog.passes_done, self.prog.samples
+        return [f"{self.frame_ms:.1f} ms  {self.fps:.0f} fps",
+                f"{rw}x{rh}" + (" (preview)" if preview else ""),
+                f"samples {done}/{total}" + ("" if done >= total else " ..."),
+                f"max depth {self.scene.render.max_depth}"]
+
+    def _draw_overlays(self) -> None:
+        from .ui import draw_help, draw_hud
+
+        msg = self.message if time.perf_counter() < self.message_until else ""
+        lines = self._hud_lines()
+        if not self.show_panel:
+            lines.append("Tab: settings  H: help")
+        draw_hud(lines, msg)
+        # an auto-sized ImGui window takes its new size one frame late: draw
+        # again when the overlays' layout changes
+        layout = (len(lines), msg, self.show_help, self.show_panel)
+        if layout != self._overlay_layout:
+            self._overlay_layout = layout
+            self.ui_frames = max(self.ui_frames, 2)
+        if self.show_help:
+            ds = self.imgui.get_io().display_size
+            self.show_help = draw_help((ds.x, ds.y))
+
+    # ------------------------------------------------------------ scene changes
+
+    def _apply_scene(self) -> None:
+        try:
+            self.renderer.set_scene(self.scene)
+            self.good_scene = copy.deepcopy(self.scene)
+        except Exception as e:  # ShaderError, a scene the packer rejects
+            if self.debug:
+                import traceback
+
+                traceback.print_exc()
+            self._error(f"change not applied: {e}")
+            for f in fields(Scene):
+                setattr(self.scene, f.name, copy.deepcopy(getattr(self.good_scene, f.name)))
+            self.controls.camera_edited()
+            self.controls.changed = False
+            self.renderer.set_scene(self.scene)
+        self.prog.restart()
+
+    def _error(self, text: str) -> None:
+        self._say(text.splitlines()[0] if text else text, error=False)
+        print(f"glassray: {text}", file=sys.stderr, flush=True)
+        if self.panel is not None:
+            self.panel.error = text
+
+    def reload(self) -> None:
+        """F5: the scene file (overrides applied again) and the shaders from
+        disk; on an error the last good ones keep running."""
+        try:
+            fresh = self.loader(self.args)
+        except SceneError as e:
+            self._error(f"reload failed, keeping the last good scene: {e}")
+            return
+        merged = merge_reloaded(self.file_scene, fresh, self.scene)
+        try:
+            renderer = Renderer(self.ctx, merged)  # compiles trace.frag from disk
+        except Exception as e:
+            self._error(f"reload failed, keeping the last good shaders: {e}")
+            return
+        try:
+            self.prog.reload_program()
+        except Exception as e:
+            renderer.release()
+            self._error(f"reload failed, keeping the last good shaders: {e}")
+            return
+        self.renderer.release()
+        self.renderer = renderer
+        self.prog.set_renderer(renderer)
+        self.scene = merged
+        self.file_scene = copy.deepcopy(fresh)
+        self.good_scene = copy.deepcopy(merged)
+        self.controls.rebase(merged, start=fresh)
+        if self.panel is not None:
+            self.panel.error = ""
+        glfw.set_window_title(self.window, self._title(merged))
+        self.need_preview = True
+        self.last_change = time.perf_counter()
+        self._say("reloaded scene and shaders")
+        print("reloaded", flush=True)
+
+    # ------------------------------------------------------------ screenshots
+
+    def screenshot(self) -> None:
+        """P: the accumulated image (at least one full sample), no HUD or panel."""
+        self.prog.finish_pass()
+        try:
+            path = save_linear(self.prog.image())
+        except OSError as e:
+            self._say(f"screenshot not saved: {e.strerror or e}", error=True)
+            return
+        print(os.path.abspath(path), flush=True)
+        self._say(f"saved {path.name}")
+
+    def _window_screenshot(self, fbw: int, fbh: int) -> None:
+        raw = self.ctx.screen.read(viewport=(0, 0, fbw, fbh), components=3, alignment=1)
+        rgb = np.frombuffer(raw, dtype=np.uint8).reshape(fbh, fbw, 3)[::-1]
+        try:
+            path = save_rgb8(rgb)
+        except OSError as e:
+            self._say(f"screenshot not saved: {e.strerror or e}", error=True)
+            return
+        print(os.path.abspath(path), flush=True)
+        self._say(f"saved {path.name}")
+
+    # ------------------------------------------------------------ soak (debug)
+
+    def _soak_step(self) -> None:
+        """Programmatic input for ``--soak N``: the camera orbits and zooms,
+        the light moves, the panel opens and closes, the window changes size,
+        and every few frames the view stays still so that samples accumulate."""
+        n = self.frames
+        c = self.controls
+        if n == 0:
+            self._soak_depth = min(9, self.scene.render.max_depth)
+        phase = n % 40
+        if phase < 30:
+            c.orbit_pixels(3.0, 2.0 * math.sin(n * 0.05))
+            if n % 7 == 0:
+                c.key("d" if (n // 70) % 2 == 0 else "a", shift=n % 14 == 0)
+            if n % 11 == 0:
+                c.scroll(0.0, 0.5 if (n // 110) % 2 == 0 else -0.5)
+            if n % 97 == 0:  # two depths, both compiled during the warm-up
+                c.key("3" if (n // 97) % 2 == 0 else str(self._soak_depth))
+        if n % 150 == 0 and self.panel is not None:
+            self.show_panel = not self.show_panel
+            self.panel.open_all = True  # every widget of the panel drawn
+        if n % 60 == 30:
+            self.show_help = not self.show_help
+        if n % 250 == 125:
+            w, h = self.args.size
+            k = (n // 250) % 3
+            glfw.set_window_size(self.window, max(1, w + 16 * k), max(1, h + 8 * k))
+        self.ui_frames = max(self.ui_frames, 1)
+
+    # ------------------------------------------------------------ shutdown
+
+    def close(self) -> None:
+        if self._imgui_ready:
+            try:
+                self.imgui.backends.opengl3_shutdown()
+                self.imgui.backends.glfw_shutdown()
+                self.imgui.destroy_context()
+            except Exception:
+                pass
+            self._imgui_ready = False
+        for obj in (self.prog, self.renderer):
+            if obj is not None:
+                try:
+                    obj.release()
+                except Exception:
+                    pass
+        self.prog = self.renderer = None
+        if self.ctx is not None:
+            try:
+                self.ctx.release()
+            except Exception:
+                pass
+            self.ctx = None
+        if self.window is not None:
+            glfw.destroy_window(self.window)
+            self.window = None
+        glfw.terminate()
+
+
+def help_text() -> str:
+    width = max(len(k) for k, _ in HELP)
+    return "\n".join(f"  {k:<{width}}  {v.replace('`', '')}" for k, v in HELP)
+
+
+_GL_IS = (("buffers", "glIsBuffer"), ("textures", "glIsTexture"), ("framebuffers", "glIsFramebuffer"),
+          ("vertex_arrays", "glIsVertexArray"), ("programs", "glIsProgram"), ("shaders", "glIsShader"),
+          ("renderbuffers", "glIsRenderbuffer"), ("samplers", "glIsSampler"), ("queries", "glIsQuery"))
+
+
+def gl_object_counts(ctx: moderngl.Context, prog: Progressive) -> dict[str, int]:
+    """How many GL objects of each kind exist in the current context
+    (glIs* over every name up to a little past the newest one).  For the
+    soak test: the counts must stay flat."""
+    proto = ctypes.CFUNCTYPE(ctypes.c_ubyte, ctypes.c_uint)
+    probes = [ctx.buffer(reserve=4), ctx.texture((1, 1), 4)]
+    probes.append(ctx.framebuffer(color_attachments=[probes[1]]))
+    probes.append(ctx.vertex_array(prog.program, []))
+    upper = max(p.glo for p in probes) + 256
+    upper = max(upper, prog.program.glo + 256)
+    counts = {}
+    try:
+        for kind, fname in _GL_IS:
+            addr = glfw.get_proc_address(fname)
+            if not addr:
+                continue
+            fn = proto(addr)
+            counts[kind] = sum(1 for name in range(1, upper) if fn(name))
+    finally:
+        for p in reversed(probes):
+            p.release()
+    for kind in ("buffers", "textures", "framebuffers", "vertex_arrays"):  # less the probes
+        if kind in counts:
+            counts[kind] -= 1
+    return counts

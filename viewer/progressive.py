@@ -1,0 +1,298 @@
+"""Progressive rendering for the viewer: previews while things move,
+accumulation when they stop, and the display pass.  No window code here: it
+draws with the shared :class:`~viewer.renderer.Renderer` into its own
+framebuffers and shows the result in whatever framebuffer it is given.
+
+* Accumulation: an RGBA32F texture at the full framebuffer resolution, with
+  additive blending; every traced sample adds its radiance to rgb and 1 to
+  alpha, so each pixel divides by its own count.  A full-resolution sample is
+  traced in horizontal bands, top to bottom, as many per frame as fit in a
+  time budget, so one slow sample never blocks the event loop; sample k uses
+  offset k of ``sample_offsets(samples, seed)``, the same pattern as
+  ``glassray render``, so a finished accumulation equals the offscreen image.
+* Preview: one centred sample per pixel at a reduced resolution chosen from
+  the measured cost per pixel so that a frame holds the target frame time;
+  shown (upscaled) wherever the accumulation has no sample yet.
+* Display: ``shaders/display.frag`` divides, clamps, applies the sRGB curve
+  (the spec's display encoding) and scales to the output viewport.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import moderngl
+import numpy as np
+
+from .sampling import sample_offsets
+from .shaders import build_program
+
+#: Smallest preview scale (fraction of the framebuffer's width and height).
+MIN_PREVIEW_SCALE = 1.0 / 32.0
+#: Most pixels one draw call may cover (as the offscreen renderer's tiles).
+MAX_DRAW_PIXELS = 512 * 512
+
+
+class Progressive:
+    def __init__(self, ctx: moderngl.Context, renderer, target_ms: float = 33.0, seed: int = 0):
+        self.ctx = ctx
+        self.renderer = renderer
+        self.target_ms = float(target_ms)
+        self.seed = seed
+        self.programs, self.vaos = self._build_display()
+        self.size = (0, 0)
+        self.accum_tex = self.accum_fbo = None
+        self.preview_tex = self.preview_fbo = None
+        self.preview8_tex = self.preview8_fbo = None  # the preview, display-encoded
+        self.preview_size: tuple[int, int] | None = None  # (pw, ph) of the latest preview
+        self.passes_done = 0  # complete full-resolution samples
+        self.next_row = 0  # first row (from the top) of the current pass not yet traced
+        self.cost_per_px: float | None = None  # seconds per pixel-sample (moving average)
+        self.last_trace_ms = 0.0
+        self._offsets = None
+        self._offsets_key = None
+
+    # ------------------------------------------------------------ state
+
+    @property
+    def samples(self) -> int:
+        return int(self.renderer.scene.render.samples)
+
+    @property
+    def done(self) -> bool:
+        return self.passes_done >= self.samples
+
+    @property
+    def active_resolution(self) -> tuple[int, int]:
+        """What the latest trace work ran at: the preview's size until the
+        first full-resolution band lands, then the full size."""
+        if (self.passes_done > 0 or self.next_row > 0) or self.preview_size is None:
+            return self.size
+        return self.preview_size
+
+    def offsets(self) -> np.ndarray:
+        key = (self.samples, self.seed)
+        if key != self._offsets_key:
+            self._offsets = sample_offsets(self.samples, self.seed)
+            self._offsets_key = key
+        return self._offsets
+
+    def set_renderer(self, renderer) -> None:
+        self.renderer = renderer
+        self.restart()
+
+    def resize(self, width: int, height: int) -> None:
+        """Reallocate for a framebuffer of this size (nothing for 0 x 0)."""
+        if (width, height) == self.size:
+            return
+        self._release_targets()
+        self.size = (width, height)
+        self.preview_size = None
+        if width > 0 and height > 0:
+            ctx = self.ctx
+            self.accum_tex = ctx.texture((width, height), 4, dtype="f4")
+            self.accum_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+            self.accum_fbo = ctx.framebuffer(color_attachments=[self.accum_tex])
+            self.preview_tex = ctx.texture((width, height), 4, dtype="f4")
+            self.preview_tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
+            self.preview_tex.repeat_x = self.preview_tex.repeat_y = False
+            self.preview_fbo = ctx.framebuffer(color_attachments=[self.preview_tex])
+            self.preview8_tex = ctx.texture((width, height), 4)
+            self.preview8_tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
+            self.preview8_tex.repeat_x = self.preview8_tex.repeat_y = False
+            self.preview8_fbo = ctx.framebuffer(color_attachments=[self.preview8_tex])
+        self.restart()
+
+    def restart(self) -> None:
+        """The scene changed: throw the accumulated samples away."""
+        self.passes_done = 0
+        self.next_row = 0
+        if self.accum_fbo is not None:
+            self.accum_fbo.clear(0.0, 0.0, 0.0, 0.0)
+
+    # ------------------------------------------------------------ tracing
+
+    def _note_cost(self, seconds: float, pixels: int) -> None:
+        if pixels <= 0:
+            return
+        c = max(seconds, 1e-6) / pixels
+        self.cost_per_px = c if self.cost_per_px is None else 0.5 * self.cost_per_px + 0.5 * c
+
+    def preview_scale(self, budget_ms: float | None = None) -> float:
+        """The scale whose preview should take about ``budget_ms`` to trace."""
+        w, h = self.size
+        budget = (self.target_ms if budget_ms is None else budget_ms) / 1000.0
+        if self.cost_per_px is None or w * h == 0:
+            return 0.125  # unknown yet: start small (a software renderer is slow)
+        s = math.sqrt(max(budget, 1e-4) / (self.cost_per_px * w * h))
+        return min(1.0, max(MIN_PREVIEW_SCALE, s))
+
+    def render_preview(self, budget_ms: float | None = None) -> float:
+        """Trace one centred sample per pixel at the reduced resolution; return ms."""
+        w, h = self.size
+        if w == 0 or h == 0:
+            return 0.0
+        s = self.preview_scale(budget_ms)
+        pw, ph = max(1, round(w * s)), max(1, round(h * s))
+        ctx = self.ctx
+        t0 = time.perf_counter()
+        self.preview_fbo.viewport = (0, 0, pw, ph)
+        self.preview_fbo.use()
+        ctx.disable(moderngl.BLEND)
+        # bands of at most MAX_DRAW_PIXELS keep each draw call short
+        rows = max(1, MAX_DRAW_PIXELS // pw)
+        for y in range(0, ph, rows):
+            self.renderer.draw_sample(pw, ph, (0.5, 0.5), (0, y, pw, min(rows, ph - y)))
+        ctx.finish()
+        dt = time.perf_counter() - t0
+        self._note_cost(dt, pw * ph)
+        self.preview_size = (pw, ph)
+        # display-encode it once at its own size: scaling it up is then a plain texture read
+        self._draw(1, self.preview8_fbo, (0, 0, pw, ph))
+        self.last_trace_ms = dt * 1000.0
+        return self.last_trace_ms
+
+    def _band(self, rows: int) -> None:
+        """Trace `rows` rows of the current pass from next_row down."""
+        w, h = self.size
+        off = self.offsets()[self.passes_done]
+        y0 = h - self.next_row - rows  # GL rows count from the bottom
+        self.renderer.draw_sample(w, h, (float(off[0]), float(off[1])), (0, y0, w, rows))
+        self.next_row += rows
+        if self.next_row >= h:
+            self.passes_done += 1
+            self.next_row = 0
+
+    def accumulate(self, budget_ms: float | None = None, stop_at_pass_end: bool = False) -> float:
+        """Trace full-resolution bands until the budget is spent or all
+        samples are done (at least one band per call; with
+        ``stop_at_pass_end``, also when a sample is complete); return ms spent."""
+        w, h = self.size
+        if w == 0 or h == 0 or self.done:
+            return 0.0
+        budget = (self.target_ms if budget_ms is None else budget_ms) / 1000.0
+        ctx = self.ctx
+        self.accum_fbo.use()
+        ctx.enable(moderngl.BLEND)
+        ctx.blend_func = moderngl.ONE, moderngl.ONE
+        ctx.blend_equation = moderngl.FUNC_ADD
+        t_start = time.perf_counter()
+        try:
+            first = True
+            while not self.done:
+                left = budget - (time.perf_counter() - t_start)
+                if left <= 0 and not first:
+                    break
+                first = False
+                if self.cost_per_px is None:
+                    rows = min(8, h)
+                else:
+                    rows = int(max(left, 0.0) / (self.cost_per_px * w))
+                rows = max(1, min(rows, h - self.next_row, max(1, MAX_DRAW_PIXELS // w)))
+                t0 = time.perf_counter()
+                self._band(rows)
+                ctx.finish()
+                self._note_cost(time.perf_counter() - t0, rows * w)
+                if stop_at_pass_end and self.next_row == 0:
+                    break
+        finally:
+            ctx.disable(moderngl.BLEND)
+        self.last_trace_ms = (time.perf_counter() - t_start) * 1000.0
+        return self.last_trace_ms
+
+    def finish_pass(self) -> None:
+        """Complete the current full-resolution sample if none is complete
+        yet (a screenshot needs every pixel to have one)."""
+        if self.passes_done == 0 and self.size[0] > 0 and self.size[1] > 0:
+            while self.passes_done == 0:
+                self.accumulate(budget_ms=1e9, stop_at_pass_end=True)
+
+    # ------------------------------------------------------------ output
+
+    def image(self) -> np.ndarray:
+        """(H, W, 3) float32 linear radiance, each pixel the mean of its
+        accumulated samples (0 where it has none), first row = top."""
+        w, h = self.size
+        raw = self.accum_tex.read()
+        acc = np.frombuffer(raw, dtype=np.float32).reshape(h, w, 4)[::-1]
+        count = acc[:, :, 3:4]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            img = np.where(count > 0, acc[:, :, :3] / np.maximum(count, 1e-30), 0.0)
+        return np.ascontiguousarray(img, dtype=np.float32)
+
+    def _build_display(self):
+        """The display programs, one per DISPLAY_MODE (see display.frag)."""
+        progs, vaos = [], []
+        try:
+            for mode in (0, 1, 2, 3):
+                progs.append(build_program(self.ctx, fragment="display.frag", vertex="fullscreen.vert",
+                                           defines={"DISPLAY_MODE": mode}))
+                vaos.append(self.ctx.vertex_array(progs[-1], []))
+        except Exception:
+            for obj in vaos + progs:
+                obj.release()
+            raise
+        return progs, vaos
+
+    @property
+    def program(self) -> moderngl.Program:
+        return self.programs[0]
+
+    def display(self, fbo: moderngl.Framebuffer, viewport: tuple[int, int, int, int]) -> None:
+        """Draw the current image into ``fbo`` over ``viewport`` (x, y, w, h)."""
+        if self.accum_tex is None:
+            fbo.use()
+            self.ctx.clear(0.0, 0.0, 0.0, 1.0)
+            return
+        if self.passes_done > 0:
+            mode = 2  # every pixel has a sample
+        elif self.next_row > 0 or self.preview_size is None:
+            mode = 0  # the first sample is on its way
+        else:
+            mode = 3  # nothing accumulated yet: the encoded preview
+        self._draw(mode, fbo, viewport)
+
+    def _draw(self, mode: int, fbo: moderngl.Framebuffer, viewport: tuple[int, int, int, int]) -> None:
+        ctx = self.ctx
+        fbo.viewport = viewport
+        fbo.use()
+        ctx.scissor = None
+        ctx.disable(moderngl.BLEND | moderngl.DEPTH_TEST | moderngl.CULL_FACE)
+        w, h = self.size
+        pw, ph = self.preview_size or (1, 1)
+        prog = self.programs[mode]
+        self.accum_tex.use(location=0)
+        (self.preview8_tex if mode == 3 else self.preview_tex).use(location=1)
+        for name, value in (("accumTex", 0), ("previewTex", 1), ("outSize", (float(viewport[2]), float(viewport[3]))),
+                            ("accumSize", (float(w), float(h))), ("previewUsed", (pw / w, ph / h)),
+                            ("previewTexel", (1.0 / w, 1.0 / h)), ("hasPreview", int(self.preview_size is not None))):
+            if name in prog:
+                prog[name].value = value
+        self.vaos[mode].render(moderngl.TRIANGLES, vertices=3)
+
+    def reload_program(self) -> None:
+        """Rebuild the display shaders from disk (raises ShaderError, keeping the old ones)."""
+        progs, vaos = self._build_display()
+        self._release_display()
+        self.programs, self.vaos = progs, vaos
+
+    def _release_display(self) -> None:
+        for obj in self.vaos + self.programs:
+            obj.release()
+        self.vaos, self.programs = [], []
+
+    # ------------------------------------------------------------ cleanup
+
+    def _release_targets(self) -> None:
+        for obj in (self.accum_fbo, self.accum_tex, self.preview_fbo, self.preview_tex, self.preview8_fbo,
+                    self.preview8_tex):
+            if obj is not None:
+                obj.release()
+        self.accum_fbo = self.accum_tex = self.preview_fbo = self.preview_tex = None
+        self.preview8_fbo = self.preview8_tex = None
+
+    def release(self) -> None:
+        self._release_targets()
+        self._release_display()
+        self.size = (0, 0)
