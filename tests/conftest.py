@@ -24,12 +24,20 @@ def update_goldens(request) -> bool:
 
 
 @pytest.fixture(scope="session")
-def gl():
+def _gl_session():
     from viewer.context import create_offscreen_context
 
     ctx, _backend = create_offscreen_context("egl")
     yield ctx
     ctx.release()
+
+
+@pytest.fixture
+def gl(_gl_session):
+    """The session's context, made current for this test: tests of contexts
+    and of the CLI in-process create, switch and release their own."""
+    _gl_session.__enter__()
+    return _gl_session
 
 
 @pytest.fixture
