@@ -23,21 +23,29 @@ def update_goldens(request) -> bool:
     return request.config.getoption("--update-goldens")
 
 
+_SESSION: dict = {}
+
+
 @pytest.fixture(scope="session")
-def _gl_session():
+def gl():
+    """One EGL context for the whole session."""
     from viewer.context import create_offscreen_context
 
     ctx, _backend = create_offscreen_context("egl")
+    _SESSION["ctx"] = ctx
     yield ctx
+    _SESSION.clear()
     ctx.release()
 
 
-@pytest.fixture
-def gl(_gl_session):
-    """The session's context, made current for this test: tests of contexts
-    and of the CLI in-process create, switch and release their own."""
-    _gl_session.__enter__()
-    return _gl_session
+@pytest.fixture(autouse=True)
+def _gl_current():
+    """Make the session's context current again before every test: tests of
+    contexts and of the benchmark create, switch and release their own."""
+    ctx = _SESSION.get("ctx")
+    if ctx is not None:
+        ctx.__enter__()
+    yield
 
 
 @pytest.fixture

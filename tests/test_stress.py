@@ -21,6 +21,7 @@ SIZE = (48, 27)   # cases that need a pixel on the view axis use 49x27
 
 @pytest.fixture(scope="module")
 def suite(gl):
+    gl.__enter__()  # current even if an earlier test left another context current
     return stress.Suite(gl)
 
 
