@@ -1,0 +1,864 @@
+"""Sweep the settings that trade frame time for image error and mark the Pareto front.
+
+``glassray bench [SCENE]`` renders each benchmark scene under a set of
+settings (max depth, samples per pixel, min weight, resolution scale, the
+scene-specialised against the generic all-features shader, exact Fresnel
+against Schlick's approximation), times every setting and measures its error
+against a converged float64 reference image:
+
+* time: one warm-up render per setting (its image is the one compared), then
+  ``--repeat`` timed renders, each finished on the GPU before the clock stops
+  (the read-back waits for it).  The timed renders are interleaved in rounds
+  (every setting once per round, the order reversed every other round), so a
+  burst of load from other processes spreads over all settings instead of
+  landing on one.  Two clocks, medians of both: wall-clock frame time, and
+  the process's CPU time (all threads: on a software renderer such as
+  llvmpipe, the work done, which other load on the machine hardly changes;
+  on a hardware GPU it is only the driver's share and means little).  A
+  resolution-scaled setting is timed at its reduced size (the upscale,
+  bilinear, is a blit on a real GPU and is not counted).
+* error: against the float64 NumPy tracer (``viewer.reference``) at the full
+  size with ``--reference-samples`` samples of the shared stratified pattern
+  (seed 1, while the timed renders use seed 0, so no setting shares the
+  reference's sample positions beyond the always-centred first one), max
+  depth 16 and min weight 1e-4 (deeper than any setting swept; going to depth
+  32 / 1e-6 changes the default scene's reference by 4e-4 RMSE, well under
+  the reference's own sampling noise of about 3e-3 at 128 samples).  Reference images are cached in the
+  output folder, keyed by scene content, size, samples and the reference
+  tracer's source.  Metrics: RMSE over all pixels and channels in linear
+  space, the fraction of pixels with a channel more than 1/255 off in
+  display space (the spec's encoding), the largest absolute linear difference.
+* Pareto front of (time, RMSE), per clock: a setting is on it when no other
+  setting is as fast and as good and better in one.  Time differences under
+  ``--time-tolerance`` (5%) count as ties (measurement noise), and so do RMSE
+  differences under ``--error-tolerance`` (1%: a change that small, such as
+  depth 8 against 10 behind a glass sphere, is far below the images' sampling
+  noise, which then sets its sign).
+
+Writes to ``--out`` (default ./bench-results): results.csv, results.md (the
+tables), machine.json (platform, CPU, load, GL renderer, versions, date,
+command, the headline numbers) and pareto.png / pareto-cpu.png (time against
+RMSE, log axes, Pareto front marked, default settings labelled; these need
+matplotlib: ``pip install glassray[bench]``).  The same tables go to stdout.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import datetime as _dt
+import hashlib
+import io
+import json
+import math
+import os
+import platform
+import statistics
+import sys
+import time
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+#: The benchmark's scenes when none is named: the default scene, opaque only,
+#: one glass sphere, many objects.
+DEFAULT_SCENES = ("default", "bench-opaque", "glass-sphere", "bench-many")
+DEFAULT_SIZE = (320, 180)
+DEFAULT_REPEAT = 5
+DEFAULT_REFERENCE_SAMPLES = 128
+QUICK_REFERENCE_SAMPLES = 4
+RENDER_SEED = 0
+REFERENCE_SEED = 1
+REFERENCE_MAX_DEPTH = 16
+REFERENCE_MIN_WEIGHT = 1e-4
+
+DEFAULT_TIME_TOLERANCE = 0.05
+#: RMSEs closer than this (relative) are one error.  Two settings that
+#: differ only slightly (depth 8 against 10 behind a glass sphere) change
+#: the image far less than its sampling noise, and the sign of such a small
+#: RMSE difference is then set by that noise, not by quality.
+DEFAULT_ERROR_TOLERANCE = 0.01
+CLOCKS = ("wall", "cpu")
+
+CSV_COLUMNS = ("scene", "setting", "is_default", "pareto_wall", "pareto_cpu", "max_depth", "samples",
+               "min_weight", "scale", "width", "height", "specialise", "fresnel", "time_ms", "time_min_ms",
+               "time_max_ms", "cpu_ms", "repeat", "rmse", "frac_off_1_255", "max_abs_err")
+
+
+# ---------------------------------------------------------------- settings
+
+
+@dataclass(frozen=True)
+class Setting:
+    """One point of the sweep.  ``label`` names what differs from the scene's
+    own settings ("default" for none)."""
+    label: str
+    max_depth: int
+    samples: int
+    min_weight: float
+    scale: float = 1.0
+    specialise: bool = True
+    fresnel: str = "exact"
+
+    def key(self) -> tuple:
+        return (self.max_depth, self.samples, self.min_weight, self.scale, self.specialise, self.fresnel)
+
+
+def _fmt_w(w: float) -> str:
+    return f"{w:g}"
+
+
+def sweep(scene, quick: bool = False, reference_samples: int | None = None) -> list[Setting]:
+    """The settings benchmarked for one scene: its own settings ("default"),
+    each knob moved on its own, and a few combined presets.  Sample counts
+    at or above the reference's are left out (they would measure the
+    reference's own noise)."""
+    r = scene.render
+    base = Setting("default", r.max_depth, r.samples, r.min_weight)
+    out: list[Setting] = [base]
+
+    def add(s: Setting) -> None:
+        if reference_samples is not None and s.samples != base.samples and s.samples >= reference_samples:
+            return
+        if all(s.key() != o.key() for o in out):
+            out.append(s)
+
+    if quick:
+        add(replace(base, label="max_depth=2", max_depth=2))
+        add(replace(base, label=f"samples={1 if r.samples > 1 else 2}", samples=1 if r.samples > 1 else 2))
+        add(replace(base, label="min_weight=0.01", min_weight=0.01))
+        add(replace(base, label="scale=0.5", scale=0.5))
+        add(replace(base, label="generic", specialise=False))
+        add(replace(base, label="schlick", fresnel="schlick"))
+        return out
+    for d in (1, 2, 4, 6, 8, 12):
+        if d != r.max_depth:
+            add(replace(base, label=f"max_depth={d}", max_depth=d))
+    for s in (1, 4, 8, 16, 32):
+        if s != r.samples:
+            add(replace(base, label=f"samples={s}", samples=s))
+    for w in (0.03, 0.01, 0.001, 0.0001):
+        if w != r.min_weight:
+            add(replace(base, label=f"min_weight={_fmt_w(w)}", min_weight=w))
+    for sc in (0.25, 0.5, 0.75):
+        add(replace(base, label=f"scale={sc:g}", scale=sc))
+    add(replace(base, label="generic", specialise=False))
+    add(replace(base, label="schlick", fresnel="schlick"))
+    # Combined presets: where several cheap changes together land.
+    add(Setting("preset:preview", 4, 1, 0.01, scale=0.5))
+    add(Setting("preset:fast", 4, 4, 0.01))
+    return out
+
+
+# ---------------------------------------------------------------- metrics
+
+
+def image_errors(image, reference) -> dict[str, float]:
+    """Error of ``image`` against ``reference`` (both (H, W, 3) linear RGB):
+    ``rmse`` over all pixels and channels in linear space, ``frac_off`` the
+    fraction of pixels with any channel more than 1/255 off after the spec's
+    display encoding, ``max_abs`` the largest absolute linear difference."""
+    from .imageio import to_display8
+
+    a = np.asarray(image, dtype=np.float64)
+    b = np.asarray(reference, dtype=np.float64)
+    if a.shape != b.shape:
+        raise ValueError(f"image shape {a.shape} differs from the reference's {b.shape}")
+    diff = a - b
+    d8 = np.abs(to_display8(a).astype(np.int16) - to_display8(b).astype(np.int16)).max(axis=-1)
+    return {"rmse": float(np.sqrt(np.mean(diff * diff))),
+            "frac_off": float(np.mean(d8 > 1)),
+            "max_abs": float(np.max(np.abs(diff))) if diff.size else 0.0}
+
+
+def upscale(image: np.ndarray, width: int, height: int) -> np.ndarray:
+    """Bilinear resize of an (h, w, 3) image to (height, width, 3), pixel
+    centres aligned (edge pixels clamped): how a reduced-resolution render is
+    shown full size."""
+    img = np.asarray(image, dtype=np.float64)
+    h, w = img.shape[:2]
+    if (h, w) == (height, width):
+        return img.copy()
+
+    def coords(n_out: int, n_in: int):
+        x = (np.arange(n_out) + 0.5) * (n_in / n_out) - 0.5
+        x = np.clip(x, 0.0, n_in - 1)
+        i0 = np.floor(x).astype(np.int64)
+        i1 = np.minimum(i0 + 1, n_in - 1)
+        return i0, i1, x - i0
+
+    y0, y1, fy = coords(height, h)
+    x0, x1, fx = coords(width, w)
+    fx = fx[None, :, None]
+    top = img[y0][:, x0] * (1 - fx) + img[y0][:, x1] * fx
+    bot = img[y1][:, x0] * (1 - fx) + img[y1][:, x1] * fx
+    return top * (1 - fy[:, None, None]) + bot * fy[:, None, None]
+
+
+def dominates(tj: float, ej: float, ti: float, ei: float, time_tol: float = 0.0, error_tol: float = 0.0) -> bool:
+    """Whether point j = (time, error) dominates point i: no slower and no
+    worse, and better in at least one.  With tolerances, differences within
+    them (relative) are ties: j must be faster than i by more than time_tol
+    or better by more than error_tol, and no slower or worse beyond them."""
+    no_worse = tj <= ti * (1 + time_tol) and ej <= ei * (1 + error_tol)
+    better = tj < ti * (1 - time_tol) or ej < ei * (1 - error_tol)
+    return no_worse and better
+
+
+def pareto_mask(times, errors, time_tol: float = 0.0, error_tol: float = 0.0) -> list[bool]:
+    """True for the points that no other point dominates (see dominates)."""
+    pts = list(zip((float(t) for t in times), (float(e) for e in errors)))
+    return [not any(dominates(tj, ej, ti, ei, time_tol, error_tol) for j, (tj, ej) in enumerate(pts) if j != i)
+            for i, (ti, ei) in enumerate(pts)]
+
+
+def render_size(setting: Setting, width: int, height: int) -> tuple[int, int]:
+    return max(1, round(width * setting.scale)), max(1, round(height * setting.scale))
+
+
+# ---------------------------------------------------------------- reference
+
+
+def _reference_source_digest() -> str:
+    try:
+        from . import reference
+
+        return hashlib.sha256(Path(reference.__file__).read_bytes()).hexdigest()[:12]
+    except Exception:  # not importable: the GPU fallback is keyed by the shader sources instead
+        from .shaders import shader_root
+
+        h = hashlib.sha256()
+        for p in sorted(shader_root().rglob("*")):
+            if p.is_file() and p.suffix in (".frag", ".glsl", ".vert"):
+                h.update(p.read_bytes())
+        return "gpu-" + h.hexdigest()[:12]
+
+
+def _reference_scene(scene):
+    from .scene import with_overrides
+
+    return with_overrides(scene, max_depth=REFERENCE_MAX_DEPTH, min_weight=REFERENCE_MIN_WEIGHT)
+
+
+def _scene_digest(scene) -> str:
+    from .scene import scene_to_toml
+
+    h = hashlib.sha256(scene_to_toml(scene).encode("utf-8"))
+    if scene.sky.type == "image" and scene.sky.image_path is not None:
+        try:
+            h.update(Path(scene.sky.image_path).read_bytes())
+        except OSError:
+            pass
+    return h.hexdigest()[:12]
+
+
+def reference_kind() -> str:
+    """"float64" when viewer.reference is importable, else "gpu" (fallback)."""
+    try:
+        from .reference import camera_rays, trace  # noqa: F401
+    except Exception:
+        return "gpu"
+    return "float64"
+
+
+def reference_image(scene, stem: str, width: int, height: int, samples: int, cache_dir: Path | None,
+                    ctx=None, log=None) -> tuple[np.ndarray, str, bool]:
+    """The converged reference image (H, W, 3) float64, its kind ("float64" or
+    "gpu") and whether it came from the cache."""
+    kind = reference_kind()
+    ref_scene = _reference_scene(scene)
+    name = (f"ref-{stem}-{_scene_digest(ref_scene)}-{width}x{height}-s{samples}-seed{REFERENCE_SEED}"
+            f"-d{REFERENCE_MAX_DEPTH}-w{REFERENCE_MIN_WEIGHT:g}-{kind}-{_reference_source_digest()}.npy")
+    path = cache_dir / name if cache_dir is not None else None
+    if path is not None and path.is_file():
+        try:
+            img = np.load(path)
+            if img.shape == (height, width, 3):
+                return img.astype(np.float64), kind, True
+        except (OSError, ValueError):
+            pass
+    t0 = time.perf_counter()
+    if kind == "float64":
+        from .reference import camera_rays, trace
+        from .sampling import sample_offsets
+
+        acc = np.zeros((height * width, 3))
+        offsets = sample_offsets(samples, REFERENCE_SEED)
+        last = t0
+        for k, off in enumerate(offsets):
+            o, d = camera_rays(ref_scene, width, height, off)
+            acc += trace(ref_scene, o.reshape(-1, 3), d.reshape(-1, 3))
+            now = time.perf_counter()
+            if log is not None and now - last > 20.0 and k + 1 < samples:
+                el, last = now - t0, now
+                log(f"  reference {k + 1}/{samples} samples, {el:.0f} s, about {el / (k + 1) * (samples - k - 1):.0f} s left")
+        img = acc.reshape(height, width, 3) / samples * ref_scene.render.exposure
+    else:
+        from .renderer import Renderer
+
+        r = Renderer(ctx, ref_scene)
+        try:
+            img = r.render(width, height, samples, REFERENCE_SEED).astype(np.float64)
+        finally:
+            r.release()
+    if path is not None:
+        from .scene import write_atomic
+
+        buf = io.BytesIO()
+        np.save(buf, img)
+        write_atomic(path, buf.getvalue())
+    return img, kind, False
+
+
+# ---------------------------------------------------------------- measuring
+
+
+@dataclass
+class Result:
+    scene: str
+    setting: Setting
+    width: int
+    height: int
+    times: list[float] = field(default_factory=list)       # wall clock, ms
+    cpu_times: list[float] = field(default_factory=list)   # process CPU time, ms
+    errors: dict[str, float] = field(default_factory=dict)
+    front: dict[str, bool] = field(default_factory=dict)   # on the Pareto front, per clock
+
+    @property
+    def time_ms(self) -> float:
+        return statistics.median(self.times)
+
+    @property
+    def cpu_ms(self) -> float:
+        return statistics.median(self.cpu_times)
+
+    def t(self, clock: str) -> float:
+        return self.cpu_ms if clock == "cpu" else self.time_ms
+
+
+class _Renderers:
+    """One Renderer per shader variant (specialised / generic, exact /
+    Schlick) of a scene; a setting switches scene values with set_scene
+    (programs are cached by their defines, so switching is cheap)."""
+
+    def __init__(self, ctx):
+        self.ctx = ctx
+        self._by_variant: dict[tuple, object] = {}
+        self._current: dict[tuple, object] = {}
+
+    def get(self, scene, setting: Setting):
+        from .renderer import Renderer
+        from .scene import with_overrides
+
+        s = with_overrides(scene, samples=setting.samples, max_depth=setting.max_depth,
+                           min_weight=setting.min_weight)
+        variant = (setting.specialise, setting.fresnel)
+        r = self._by_variant.get(variant)
+        if r is None:
+            r = Renderer(self.ctx, s, specialise=setting.specialise, fresnel=setting.fresnel)
+            self._by_variant[variant] = r
+        elif self._current.get(variant) != setting.key():
+            r.set_scene(s)
+        self._current[variant] = setting.key()
+        return r
+
+    def release(self) -> None:
+        for r in self._by_variant.values():
+            r.release()
+        self._by_variant.clear()
+
+
+def _timed_render(renderer, w: int, h: int, samples: int) -> tuple[float, float]:
+    """(wall ms, process CPU ms) of one render, finished on the GPU."""
+    ctx = renderer.ctx
+    ctx.finish()
+    c0 = time.process_time()
+    t0 = time.perf_counter()
+    renderer.render(w, h, samples, RENDER_SEED)   # the read-back waits for the GPU
+    ctx.finish()
+    return (time.perf_counter() - t0) * 1000.0, (time.process_time() - c0) * 1000.0
+
+
+def bench_scene(ctx, scene, stem: str, settings: list[Setting], width: int, height: int, repeat: int,
+                reference: np.ndarray, log=None, time_tol: float = DEFAULT_TIME_TOLERANCE,
+                error_tol: float = DEFAULT_ERROR_TOLERANCE) -> list[Result]:
+    """Warm-up render (the image compared with the reference) of every
+    setting, then ``repeat`` interleaved rounds of timed renders."""
+    pool = _Renderers(ctx)
+    results: list[Result] = []
+    try:
+        for st in settings:
+            w, h = render_size(st, width, height)
+            r = pool.get(scene, st)
+            img = r.render(w, h, st.samples, RENDER_SEED)
+            if (w, h) != (width, height):
+                img = upscale(img, width, height)
+            res = Result(stem, st, w, h, errors=image_errors(img, reference))
+            results.append(res)
+        for k in range(repeat):
+            # alternate the order between rounds so no setting always runs right after another
+            order = results if k % 2 == 0 else results[::-1]
+            for res in order:
+                st = res.setting
+                r = pool.get(scene, st)
+                wall, cpu = _timed_render(r, res.width, res.height, st.samples)
+                res.times.append(wall)
+                res.cpu_times.append(cpu)
+            if log is not None:
+                log(f"  round {k + 1}/{repeat} done")
+    finally:
+        pool.release()
+    mark_fronts(results, time_tol, error_tol)
+    return results
+
+
+def mark_fronts(results: list[Result], time_tol: float = DEFAULT_TIME_TOLERANCE,
+                error_tol: float = DEFAULT_ERROR_TOLERANCE) -> None:
+    """Set each result's Pareto membership for both clocks (time against RMSE)."""
+    for clock in CLOCKS:
+        mask = pareto_mask([r.t(clock) for r in results], [r.errors["rmse"] for r in results],
+                           time_tol, error_tol)
+        for res, m in zip(results, mask):
+            res.front[clock] = m
+
+
+# ---------------------------------------------------------------- machine
+
+
+def machine_info(ctx=None, backend: str | None = None) -> dict:
+    import moderngl
+
+    from . import __version__
+
+    cpu = platform.processor() or ""
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as f:
+            for line in f:
+                if line.lower().startswith("model name"):
+                    cpu = line.split(":", 1)[1].strip()
+                    break
+    except OSError:
+        pass
+    try:
+        cpus_usable = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        cpus_usable = os.cpu_count()
+    info = {
+        "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        "platform": platform.platform(),
+        "machine": platform.machine(),
+        "cpu": cpu,
+        "cpu_count": os.cpu_count(),
+        "cpus_usable": cpus_usable,
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "moderngl": moderngl.__version__,
+        "glassray": __version__,
+        "command": " ".join(["glassray", *sys.argv[1:]]) if sys.argv else "glassray bench",
+    }
+    if hasattr(os, "getloadavg"):
+        info["load_average_start"] = [round(x, 2) for x in os.getloadavg()]
+    if ctx is not None:
+        from .context import describe
+
+        info["gl"] = describe(ctx)
+        info["gl_vendor"] = ctx.info.get("GL_VENDOR", "")
+        info["gl_backend"] = backend
+    return info
+
+
+# ---------------------------------------------------------------- output
+
+
+def _row(res: Result) -> dict:
+    st = res.setting
+    return {"scene": res.scene, "setting": st.label, "is_default": int(st.label == "default"),
+            "pareto_wall": int(res.front["wall"]), "pareto_cpu": int(res.front["cpu"]),
+            "max_depth": st.max_depth, "samples": st.samples,
+            "min_weight": _fmt_w(st.min_weight), "scale": f"{st.scale:g}", "width": res.width,
+            "height": res.height, "specialise": int(st.specialise), "fresnel": st.fresnel,
+            "time_ms": f"{res.time_ms:.4f}", "time_min_ms": f"{min(res.times):.4f}",
+            "time_max_ms": f"{max(res.times):.4f}", "cpu_ms": f"{res.cpu_ms:.4f}", "repeat": len(res.times),
+            "rmse": f"{res.errors['rmse']:.10g}", "frac_off_1_255": f"{res.errors['frac_off']:.6g}",
+            "max_abs_err": f"{res.errors['max_abs']:.6g}"}
+
+
+def write_csv(path: Path, results: list[Result]) -> None:
+    from .scene import write_atomic
+
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=CSV_COLUMNS, lineterminator="\n")
+    w.writeheader()
+    for res in results:
+        w.writerow(_row(res))
+    write_atomic(path, buf.getvalue().encode("utf-8"))
+
+
+def speedup(results: list[Result], a: str = "generic", b: str = "default", clock: str = "wall") -> float | None:
+    """Median time of setting ``a`` over that of ``b`` (same scene)."""
+    ta = [r.t(clock) for r in results if r.setting.label == a]
+    tb = [r.t(clock) for r in results if r.setting.label == b]
+    return ta[0] / tb[0] if ta and tb and tb[0] > 0 else None
+
+
+def scene_table(results: list[Result], title: str, clock: str = "wall") -> str:
+    """A Markdown table (also readable as plain text), fastest first on ``clock``."""
+    head = ("setting", "size", "depth", "spp", "min_w", "shader", "fresnel", "ms (median)", "min..max",
+            "CPU ms", "RMSE", ">1/255", "max err", "front")
+    rows = []
+    for res in sorted(results, key=lambda r: r.t(clock)):
+        st = res.setting
+        rows.append((st.label, f"{res.width}x{res.height}", str(st.max_depth), str(st.samples),
+                     _fmt_w(st.min_weight), "spec" if st.specialise else "generic", st.fresnel,
+                     f"{res.time_ms:.1f}", f"{min(res.times):.0f}..{max(res.times):.0f}", f"{res.cpu_ms:.0f}",
+                     f"{res.errors['rmse']:.2e}", f"{100 * res.errors['frac_off']:.2f}%",
+                     f"{res.errors['max_abs']:.3f}",
+                     "**" if res.front["wall"] and res.front["cpu"] else ("w" if res.front["wall"] else
+                                                                            ("c" if res.front["cpu"] else ""))))
+    widths = [max(len(h), *(len(r[i]) for r in rows)) for i, h in enumerate(head)]
+    right = {2, 3, 4, 7, 8, 9, 10, 11, 12}
+
+    def line(cells):
+        return "| " + " | ".join(c.rjust(wd) if i in right else c.ljust(wd)
+                                 for i, (c, wd) in enumerate(zip(cells, widths))) + " |"
+
+    sep = "|" + "|".join(("-" * (wd + 1) + ":") if i in right else ("-" * (wd + 2))
+                         for i, wd in enumerate(widths)) + "|"
+    return "\n".join([f"### {title}", "", line(head), sep, *(line(r) for r in rows)])
+
+
+def scene_summary(results: list[Result], time_tol: float = DEFAULT_TIME_TOLERANCE,
+                  error_tol: float = DEFAULT_ERROR_TOLERANCE) -> list[str]:
+    out = []
+    default = next((r for r in results if r.setting.label == "default"), None)
+    generic = next((r for r in results if r.setting.label == "generic"), None)
+    if default is not None and generic is not None:
+        out.append(f"specialised vs generic shader: {speedup(results):.2f}x faster by wall clock "
+                   f"({default.time_ms:.1f} ms against {generic.time_ms:.1f} ms), "
+                   f"{speedup(results, clock='cpu'):.2f}x by CPU time "
+                   f"({default.cpu_ms:.0f} ms against {generic.cpu_ms:.0f} ms)")
+    if default is not None:
+        for clock, name in (("wall", "wall clock"), ("cpu", "CPU time")):
+            if default.front[clock]:
+                out.append(f"default settings: on the Pareto front ({name})")
+            else:
+                doms = [r.setting.label for r in results if r is not default and
+                        dominates(r.t(clock), r.errors["rmse"], default.t(clock), default.errors["rmse"],
+                                  time_tol, error_tol)]
+                out.append(f"default settings: NOT on the Pareto front ({name}; dominated by {', '.join(doms)})")
+    return out
+
+
+def plot(path: Path, by_scene: dict[str, list[Result]], titles: dict[str, str], subtitle: str,
+         clock: str = "wall") -> bool:
+    """pareto.png: per scene, median frame time against RMSE (log axes), the
+    Pareto front as a staircase, the default settings labelled.  False when
+    matplotlib is missing."""
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        return False
+    n = len(by_scene)
+    cols = 1 if n == 1 else 2
+    rows = math.ceil(n / cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(6.2 * cols if n > 1 else 8.0, 4.4 * rows), squeeze=False)
+    groups = (("default", "default", "#d62728", "*", 180), ("max_depth", "max depth", "#1f77b4", "o", 36),
+              ("samples", "samples", "#2ca02c", "s", 36), ("min_weight", "min weight", "#9467bd", "^", 40),
+              ("scale", "resolution scale", "#8c564b", "D", 32), ("generic", "generic shader", "#ff7f0e", "X", 60),
+              ("schlick", "Schlick Fresnel", "#e377c2", "P", 60), ("preset", "combined preset", "#7f7f7f", "v", 40))
+    for ax, (stem, results) in zip(axes.flat, by_scene.items()):
+        floor = min((r.errors["rmse"] for r in results if r.errors["rmse"] > 0), default=1e-6) / 2
+        err = lambda r: max(r.errors["rmse"], floor)  # noqa: E731 - log axes need > 0
+        for prefix, name, colour, marker, size in groups:
+            pts = [r for r in results if r.setting.label.split("=")[0].split(":")[0] == prefix]
+            if pts:
+                ax.scatter([r.t(clock) for r in pts], [err(r) for r in pts], c=colour, marker=marker, s=size,
+                           label=name, zorder=3, edgecolors="black" if prefix == "default" else "none",
+                           linewidths=0.6)
+        front = sorted((r for r in results if r.front[clock]), key=lambda r: (r.t(clock), err(r)))
+        if front:
+            xs, ys = [], []
+            for r in front:
+                if xs:
+                    xs.append(r.t(clock))
+                    ys.append(ys[-1])
+                xs.append(r.t(clock))
+                ys.append(err(r))
+            ax.plot(xs, ys, color="black", lw=1.0, ls="--", zorder=2, label="Pareto front")
+            ax.scatter([r.t(clock) for r in front], [err(r) for r in front], s=110, facecolors="none",
+                       edgecolors="black", linewidths=1.0, zorder=4)
+        # Labels: the default settings always (with an arrow), then the front,
+        # then the rest, each skipped when it would land on an earlier label.
+        lt = [math.log10(max(r.t(clock), 1e-9)) for r in results]
+        le = [math.log10(err(r)) for r in results]
+        span_t = (max(lt) - min(lt)) or 1.0
+        span_e = (max(le) - min(le)) or 1.0
+        placed: list[tuple[float, float]] = []
+        order = sorted(range(len(results)), key=lambda i: (results[i].setting.label != "default",
+                                                            not results[i].front[clock], results[i].t(clock)))
+        for i in order:
+            r = results[i]
+            lab = r.setting.label
+            x, y = (lt[i] - min(lt)) / span_t, (le[i] - min(le)) / span_e
+            if lab == "default":
+                ax.annotate("default", (r.t(clock), err(r)), textcoords="offset points", xytext=(-30, 26),
+                            fontsize=8, color="#d62728", fontweight="bold",
+                            arrowprops=dict(arrowstyle="->", color="#d62728", lw=0.8))
+                placed.append((x - 0.05, y + 0.12))
+                continue
+            if any(abs(x - px) < 0.07 and abs(y - py) < 0.045 for px, py in placed):
+                continue
+            placed.append((x, y))
+            short = lab.replace("max_depth=", "d").replace("samples=", "spp ").replace("min_weight=", "w ") \
+                       .replace("scale=", "x").replace("preset:", "")
+            ax.annotate(short, (r.t(clock), err(r)), textcoords="offset points", xytext=(4, 3), fontsize=6.5,
+                        color="#333333")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("frame time, ms (median, wall clock)" if clock == "wall" else
+                      "CPU time per frame, ms (median, all threads)")
+        ax.set_ylabel("RMSE against reference (linear)")
+        ax.set_title(titles.get(stem, stem), fontsize=10)
+        ax.grid(True, which="both", alpha=0.25)
+    for ax in list(axes.flat)[n:]:
+        ax.axis("off")
+    handles, labels = axes.flat[0].get_legend_handles_labels()
+    seen = dict(zip(labels, handles))
+    for ax in list(axes.flat)[1:n]:
+        for h, lab in zip(*ax.get_legend_handles_labels()):
+            seen.setdefault(lab, h)
+    fig.legend(list(seen.values()), list(seen.keys()), loc="lower center", ncol=min(5, len(seen)),
+               fontsize=8, frameon=False)
+    import textwrap
+
+    fig.suptitle("\n".join(textwrap.wrap(subtitle, 95 * cols if n > 1 else 120)), fontsize=8)
+    fig.tight_layout(rect=(0, 0.06 if rows > 1 else 0.1, 1, 0.96))
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90)
+    plt.close(fig)
+    from .scene import write_atomic
+
+    write_atomic(path, buf.getvalue())
+    return True
+
+
+# ---------------------------------------------------------------- command line
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(p) for p in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected WxH such as 320x180, got {text!r}") from None
+    if not (1 <= w <= 16384 and 1 <= h <= 16384):
+        raise argparse.ArgumentTypeError(f"width and height must be in 1..16384, got {text!r}")
+    return w, h
+
+
+def _positive(hi: int):
+    def parse(text: str) -> int:
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+        if not 1 <= v <= hi:
+            raise argparse.ArgumentTypeError(f"expected an integer in 1..{hi}, got {v}")
+        return v
+    return parse
+
+
+def _fraction(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not 0.0 <= v < 1.0:
+        raise argparse.ArgumentTypeError(f"expected a number in [0, 1), got {text!r}")
+    return v
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("scene", nargs="?", metavar="SCENE",
+                   help="benchmark only this scene (file or built-in name); default: "
+                        + ", ".join(DEFAULT_SCENES))
+    p.add_argument("--scenes", metavar="A,B,C", help="comma-separated scenes to benchmark (instead of SCENE)")
+    p.add_argument("--size", type=_size, default=DEFAULT_SIZE, metavar="WxH",
+                   help="full image size; error is measured at this size (%dx%d)" % DEFAULT_SIZE)
+    p.add_argument("--repeat", type=_positive(1000), default=DEFAULT_REPEAT, metavar="N",
+                   help=f"timed renders per setting after the warm-up; the median is reported ({DEFAULT_REPEAT})")
+    p.add_argument("--reference-samples", type=_positive(65536), default=None, metavar="N",
+                   help=f"samples per pixel of the reference ({DEFAULT_REFERENCE_SAMPLES}; "
+                        f"{QUICK_REFERENCE_SAMPLES} with --quick)")
+    p.add_argument("--quick", action="store_true", help="a tiny sweep (seven settings per scene), for tests")
+    p.add_argument("--out", default="bench-results", metavar="DIR",
+                   help="folder for results.csv, results.md, machine.json, pareto.png and the cached "
+                        "reference images (./bench-results)")
+    p.add_argument("--time-tolerance", type=_fraction, default=DEFAULT_TIME_TOLERANCE, metavar="F",
+                   help="relative time difference treated as a tie (measurement noise) when finding the "
+                        f"Pareto front ({DEFAULT_TIME_TOLERANCE:g}); 0 for the plain definition")
+    p.add_argument("--error-tolerance", type=_fraction, default=DEFAULT_ERROR_TOLERANCE, metavar="F",
+                   help="relative RMSE difference treated as a tie when finding the Pareto front "
+                        f"({DEFAULT_ERROR_TOLERANCE:g}: smaller differences are within the sampling noise "
+                        "of the images); 0 for the plain definition")
+    p.add_argument("--backend", choices=("auto", "egl", "osmesa"), default="auto",
+                   help="OpenGL context: EGL, OSMesa, or EGL falling back to OSMesa (auto)")
+
+
+def _log(msg: str) -> None:
+    print(f"bench: {msg}", file=sys.stderr, flush=True)
+
+
+def run(args) -> int:
+    from .scene import SceneError, builtin_scene_names, load_scene
+
+    debug = getattr(args, "debug", False)
+    if args.scene and args.scenes:
+        print("glassray bench: give either SCENE or --scenes, not both", file=sys.stderr)
+        return 2
+    names = [args.scene] if args.scene else (
+        [s.strip() for s in args.scenes.split(",") if s.strip()] if args.scenes else list(DEFAULT_SCENES))
+    if not names:
+        print("glassray bench: --scenes names no scene", file=sys.stderr)
+        return 2
+    scenes = []
+    for name in names:
+        try:
+            scenes.append((name, load_scene(name)))
+        except SceneError as e:
+            if name in DEFAULT_SCENES and name not in builtin_scene_names():
+                e = SceneError(f"{name}: benchmark scene missing from this installation")
+            print(f"glassray: {e}", file=sys.stderr)
+            return 2
+    width, height = args.size
+    ref_samples = args.reference_samples or (QUICK_REFERENCE_SAMPLES if args.quick else DEFAULT_REFERENCE_SAMPLES)
+    out = Path(args.out)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        probe = out / ".write-test"
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as e:
+        print(f"glassray: {args.out}: cannot write results there: {e.strerror or e}", file=sys.stderr)
+        return 1
+
+    from .context import ContextError, create_offscreen_context
+
+    try:
+        ctx, backend = create_offscreen_context(args.backend)
+    except ContextError as e:
+        print(f"glassray: {e}", file=sys.stderr)
+        return 1
+    try:
+        return _run(args, ctx, backend, scenes, width, height, ref_samples, out)
+    except KeyboardInterrupt:
+        print("glassray: interrupted", file=sys.stderr)
+        return 130
+    except Exception as e:
+        if debug:
+            raise
+        print(f"glassray: bench failed: {type(e).__name__}: {e} (run with --debug for the traceback)",
+              file=sys.stderr)
+        return 1
+    finally:
+        ctx.release()
+
+
+def _stem(name: str, scene) -> str:
+    p = Path(name)
+    return p.stem if p.suffix == ".toml" else name
+
+
+def _run(args, ctx, backend, scenes, width, height, ref_samples, out: Path) -> int:
+    info = machine_info(ctx, backend)
+    kind = reference_kind()
+    info.update({"size": f"{width}x{height}", "repeat": args.repeat, "quick": bool(args.quick),
+                 "reference": {"kind": kind, "samples": ref_samples, "seed": REFERENCE_SEED,
+                               "max_depth": REFERENCE_MAX_DEPTH, "min_weight": REFERENCE_MIN_WEIGHT},
+                 "render_seed": RENDER_SEED})
+    header = [f"glassray bench {info['date']}",
+              f"machine: {info['cpu']} ({info['cpus_usable']} usable CPUs), {info['platform']}",
+              f"GL: {info['gl']} via {backend}",
+              f"size {width}x{height}, median of {args.repeat} interleaved timed renders after a warm-up; "
+              f"Pareto front of time against RMSE with differences under {100 * args.time_tolerance:g}% in time "
+              f"and {100 * args.error_tolerance:g}% in RMSE as ties; front column: ** on both clocks, "
+              f"w wall clock only, c CPU time only",
+              (f"reference: float64 NumPy tracer, {ref_samples} samples (seed {REFERENCE_SEED}), "
+               f"max depth {REFERENCE_MAX_DEPTH}, min weight {REFERENCE_MIN_WEIGHT:g}") if kind == "float64" else
+              (f"reference: viewer.reference is not importable: FALLBACK to a GPU render with {ref_samples} "
+               f"samples (seed {REFERENCE_SEED}), max depth {REFERENCE_MAX_DEPTH}, min weight "
+               f"{REFERENCE_MIN_WEIGHT:g}: errors measure convergence of the shader, not its correctness")]
+    if "load_average_start" in info:
+        la = info["load_average_start"][0]
+        header.append(f"load average at start: {la:.2f} on {info['cpus_usable']} CPUs"
+                      + (" (the machine was busy: timings are medians of interleaved rounds)"
+                         if la > 0.5 else ""))
+    for line in header:
+        _log(line)
+
+    all_results: list[Result] = []
+    by_scene: dict[str, list[Result]] = {}
+    titles: dict[str, str] = {}
+    started = time.perf_counter()
+    for name, scene in scenes:
+        stem = _stem(name, scene)
+        settings = sweep(scene, quick=args.quick, reference_samples=ref_samples)
+        from .gpu_scene import GENERIC_LENS
+
+        if (len(scene.objects) > GENERIC_LENS["OBJECTS_LEN"] or len(scene.materials) > GENERIC_LENS["MATERIALS_LEN"]
+                or len(scene.lights) > GENERIC_LENS["LIGHTS_LEN"]):
+            settings = [s for s in settings if s.specialise]
+            _log(f"{stem}: too large for the generic shader: its setting is left out")
+        _log(f"{stem}: reference {width}x{height}, {ref_samples} samples ...")
+        t0 = time.perf_counter()
+        ref, _, cached = reference_image(scene, stem, width, height, ref_samples, out, ctx=ctx, log=_log)
+        _log(f"{stem}: reference {'from the cache' if cached else f'took {time.perf_counter() - t0:.1f} s'}")
+        _log(f"{stem}: {len(settings)} settings, warm-up and {args.repeat} rounds ...")
+        t0 = time.perf_counter()
+        results = bench_scene(ctx, scene, stem, settings, width, height, args.repeat, ref,
+                              log=_log if not args.quick else None, time_tol=args.time_tolerance,
+                              error_tol=args.error_tolerance)
+        _log(f"{stem}: done in {time.perf_counter() - t0:.1f} s")
+        by_scene[stem] = results
+        titles[stem] = f"{stem}: {scene.name}"
+        all_results.extend(results)
+
+    if hasattr(os, "getloadavg"):
+        info["load_average_end"] = [round(x, 2) for x in os.getloadavg()]
+    info["wall_s"] = round(time.perf_counter() - started, 1)
+    info["time_tolerance"] = args.time_tolerance
+    info["error_tolerance"] = args.error_tolerance
+    info["summary"] = {stem: scene_summary(res, args.time_tolerance, args.error_tolerance)
+                       for stem, res in by_scene.items()}
+    info["speedup_specialised_vs_generic"] = {
+        stem: {clock: round(speedup(res, clock=clock), 3) for clock in CLOCKS}
+        for stem, res in by_scene.items() if speedup(res) is not None}
+    info["default_on_pareto_front"] = {
+        stem: next((dict(r.front) for r in res if r.setting.label == "default"), None)
+        for stem, res in by_scene.items()}
+
+    from .scene import write_atomic
+
+    write_csv(out / "results.csv", all_results)
+    tables = []
+    for stem, res in by_scene.items():
+        tables.append(scene_table(res, titles[stem]) + "\n\n"
+                      + "\n".join(f"- {s}" for s in scene_summary(res, args.time_tolerance, args.error_tolerance)))
+    text = "\n\n".join(["\n".join(f"    {h}" for h in header), *tables]) + "\n"
+    write_atomic(out / "results.md", text.encode("utf-8"))
+    write_atomic(out / "machine.json", (json.dumps(info, indent=2) + "\n").encode("utf-8"))
+    subtitle = (f"glassray bench, {width}x{height}, {info['gl'].split(' / ')[0]}, {info['cpus_usable']} CPUs; "
+                f"reference {ref_samples} spp ({kind}); {info['date'][:10]}")
+    plotted = (plot(out / "pareto.png", by_scene, titles, subtitle + "; wall-clock frame time", "wall")
+               and plot(out / "pareto-cpu.png", by_scene, titles, subtitle + "; CPU time of all threads", "cpu"))
+
+    print(text, end="")
+    print()
+    print(f"wrote {out / 'results.csv'}, {out / 'results.md'}, {out / 'machine.json'}"
+          + (f", {out / 'pareto.png'}, {out / 'pareto-cpu.png'}" if plotted else ""))
+    if not plotted:
+        print("no plot: pareto.png needs matplotlib (pip install 'glassray[bench]')")
+    return 0
