@@ -29,14 +29,16 @@ DEFAULT_TILE = 512
 
 class Renderer:
     def __init__(self, ctx: moderngl.Context, scene: Scene, tile: int = DEFAULT_TILE,
-                 specialise: bool = True, fresnel: str = "exact"):
+                 specialise: bool = True, fresnel: str = "exact", extra_defines: dict | None = None):
         """specialise=False uses the generic all-features shader and
         fresnel="schlick" Schlick's approximation: both only for comparisons
-        in the benchmark."""
+        in the benchmark.  extra_defines are added to every program (the
+        stress suite's NAIVE_INTERSECT)."""
         self.ctx = ctx
         self.tile = tile
         self.specialise = specialise
         self.fresnel = fresnel
+        self.extra_defines = dict(extra_defines or {})
         self._programs: dict[tuple, moderngl.Program] = {}
         self._vao_for: dict[int, moderngl.VertexArray] = {}
         self._ubo: moderngl.Buffer | None = None
@@ -51,8 +53,8 @@ class Renderer:
     def set_scene(self, scene: Scene) -> None:
         """Upload a scene; recompiles only when its feature key changes."""
         packed = pack_scene(scene, self.specialise, self.fresnel)
-        self._defines = packed.defines
-        self.program = self._program(packed.defines)
+        self._defines = {**packed.defines, **self.extra_defines}
+        self.program = self._program(self._defines)
         if self._ubo is None or self._ubo.size != len(packed.block):
             if self._ubo is not None:
                 self._ubo.release()

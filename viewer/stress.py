@@ -525,10 +525,9 @@ class Suite:
         def go():
             from .renderer import Renderer
 
-            r = Renderer(self.ctx, self.scene(doc))
+            r = Renderer(self.ctx, self.scene(doc),
+                         extra_defines={"NAIVE_INTERSECT": True} if self.naive else None)
             try:
-                if self.naive:
-                    r.program = r._program({**r._defines, "NAIVE_INTERSECT": True})
                 r.render(w, h, 1)
                 t0 = time.perf_counter()
                 img = r.render(w, h, 1)
@@ -793,32 +792,6 @@ def _cameras(obj: dict, n: int, rng) -> list[tuple[str, list[float], list[float]
     return [(k, [float(x) for x in p], [float(x) for x in t], float(fv), s) for k, p, t, fv, s in cams]
 
 
-def _first_hit_t(renderer, w: int, h: int, offset, naive: bool) -> tuple[np.ndarray, np.ndarray]:
-    """The shader's first hit (VIEW_MODE 1): t (inf: miss) and object index."""
-    import moderngl
-
-    main = renderer.program
-    defines = {**renderer._defines, "VIEW_MODE": 1}
-    if naive:
-        defines["NAIVE_INTERSECT"] = True
-    renderer.program = renderer._program(defines)
-    ctx = renderer.ctx
-    fbo = ctx.simple_framebuffer((w, h), components=4, dtype="f4")
-    try:
-        fbo.use()
-        fbo.clear(0.0, 0.0, 0.0, 0.0)
-        ctx.disable(moderngl.BLEND)
-        for rect in renderer.tiles(w, h):
-            renderer.draw_sample(w, h, offset, rect)
-        raw = np.frombuffer(fbo.read(components=4, dtype="f4"), np.float32).reshape(h, w, 4)[::-1]
-    finally:
-        fbo.release()
-        renderer.program = main
-    obj = raw[..., 1].round().astype(np.int32)
-    t = np.where(obj >= 0, raw[..., 0], np.inf)
-    return t, obj
-
-
 @dataclass
 class ErrorStats:
     primitive: str
@@ -867,7 +840,9 @@ def intersection_errors(ctx, cameras_per_kind: int = 8, seed: int = 1,
                 rhit = robj.reshape(h, w) >= 0
                 rays += w * h
                 for naive in (False, True):
-                    t, gobj = _first_hit_t(renderer, w, h, tuple(off), naive)
+                    renderer.extra_defines = {"NAIVE_INTERSECT": True} if naive else {}
+                    renderer.set_scene(scene)
+                    t, gobj, _ = renderer.first_hits(w, h, tuple(off))
                     ghit = gobj >= 0
                     disagree[naive] += int(np.sum(ghit != rhit))
                     both = ghit & rhit & (rt > 0)
