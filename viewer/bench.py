@@ -649,16 +649,6 @@ def plot(path: Path, by_scene: dict[str, list[Result]], titles: dict[str, str], 
 # ---------------------------------------------------------------- command line
 
 
-def _size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(p) for p in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected WxH such as 320x180, got {text!r}") from None
-    if not (1 <= w <= 16384 and 1 <= h <= 16384):
-        raise argparse.ArgumentTypeError(f"width and height must be in 1..16384, got {text!r}")
-    return w, h
-
-
 def _positive(hi: int):
     def parse(text: str) -> int:
         try:
@@ -686,7 +676,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="benchmark only this scene (file or built-in name); default: "
                         + ", ".join(DEFAULT_SCENES))
     p.add_argument("--scenes", metavar="A,B,C", help="comma-separated scenes to benchmark (instead of SCENE)")
-    p.add_argument("--size", type=_size, default=DEFAULT_SIZE, metavar="WxH",
+    from .cli import size_type
+
+    p.add_argument("--size", type=size_type(), default=DEFAULT_SIZE, metavar="WxH",
                    help="full image size; error is measured at this size (%dx%d)" % DEFAULT_SIZE)
     p.add_argument("--repeat", type=_positive(1000), default=DEFAULT_REPEAT, metavar="N",
                    help=f"timed renders per setting after the warm-up; the median is reported ({DEFAULT_REPEAT})")

@@ -44,14 +44,20 @@ def _vec3(text: str) -> tuple[float, float, float]:
     return vals  # type: ignore[return-value]
 
 
-def _size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(p) for p in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected WxH such as 1280x720, got {text!r}") from None
-    if not (1 <= w <= 16384 and 1 <= h <= 16384):
-        raise argparse.ArgumentTypeError(f"width and height must be in 1..16384, got {text!r}")
-    return w, h
+def size_type(lo: int = 1, hi: int = 16384):
+    """argparse type for WxH with both sides in lo..hi (shared by bench and stress)."""
+    def parse(text: str) -> tuple[int, int]:
+        try:
+            w, h = (int(p) for p in text.lower().split("x"))
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected WxH such as 1280x720, got {text!r}") from None
+        if not (lo <= w <= hi and lo <= h <= hi):
+            raise argparse.ArgumentTypeError(f"width and height must be in {lo}..{hi}, got {text!r}")
+        return w, h
+    return parse
+
+
+_size = size_type()
 
 
 def _int_range(lo: int, hi: int):

@@ -916,20 +916,12 @@ def camera_relative_errors(offsets=(0.0, 1e2, 1e4, 1e6), n: int = 20000, seed: i
 # ---------------------------------------------------------------- command line
 
 
-def _size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(p) for p in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected WxH such as 96x54, got {text!r}") from None
-    if not (4 <= w <= 4096 and 4 <= h <= 4096):
-        raise argparse.ArgumentTypeError(f"width and height must be in 4..4096, got {text!r}")
-    return w, h
-
-
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--list", action="store_true", help="list the cases with what they test and their tolerance")
     p.add_argument("--case", action="append", metavar="NAME", help="run only this case (repeatable)")
-    p.add_argument("--size", type=_size, default=DEFAULT_SIZE, metavar="WxH",
+    from .cli import size_type
+
+    p.add_argument("--size", type=size_type(4, 4096), default=DEFAULT_SIZE, metavar="WxH",
                    help="image size of every case (%dx%d); cases that need a pixel on the view axis use "
                         "the next odd width and height" % DEFAULT_SIZE)
     p.add_argument("--out", default=DEFAULT_OUT, metavar="DIR",

@@ -67,6 +67,23 @@ float hitSphere(vec3 center, float radius, vec3 ro, vec3 rd, float tmin, float t
 }
 #endif
 
+// The box's hit from its slab interval [tEnter, tExit] (in the box frame,
+// with the axes that set each end): the entry if it lies past tmin, else the
+// exit, with the outward normal turned back to world space.
+float boxHitFromSlabs(float tEnter, float tExit, int axisEnter, int axisExit, vec3 d, mat3 localFromWorld,
+                      float tmin, float tmax, out vec3 n) {
+    n = vec3(0.0);
+    if (tEnter > tExit) return INF;
+    vec3 nl = vec3(0.0);
+    float t;
+    if (tEnter > tmin) { t = tEnter; nl[axisEnter] = -sign(d[axisEnter]); }
+    else if (tExit > tmin) { t = tExit; nl[axisExit] = sign(d[axisExit]); }
+    else return INF;
+    if (t >= tmax) return INF;
+    n = transpose(localFromWorld) * nl;
+    return t;
+}
+
 #ifdef NAIVE_INTERSECT
 // Textbook slabs with plain 1/d: a zero direction component gives +-inf,
 // and 0 * inf = NaN when the origin lies on that slab's plane.
@@ -81,16 +98,7 @@ float hitBox(Object o, vec3 ro, vec3 rd, float tmin, float tmax, out vec3 n) {
     float tEnter = max(tn.x, max(tn.y, tn.z)), tExit = min(tf.x, min(tf.y, tf.z));
     int axisEnter = tEnter == tn.x ? 0 : (tEnter == tn.y ? 1 : 2);
     int axisExit = tExit == tf.x ? 0 : (tExit == tf.y ? 1 : 2);
-    n = vec3(0.0);
-    if (tEnter > tExit) return INF;
-    vec3 nl = vec3(0.0);
-    float t;
-    if (tEnter > tmin) { t = tEnter; nl[axisEnter] = -sign(d[axisEnter]); }
-    else if (tExit > tmin) { t = tExit; nl[axisExit] = sign(d[axisExit]); }
-    else return INF;
-    if (t >= tmax) return INF;
-    n = transpose(localFromWorld) * nl;
-    return t;
+    return boxHitFromSlabs(tEnter, tExit, axisEnter, axisExit, d, localFromWorld, tmin, tmax, n);
 }
 #else
 // Slab test in the box's own frame; zero direction components are handled
@@ -115,16 +123,7 @@ float hitBox(Object o, vec3 ro, vec3 rd, float tmin, float tmax, out vec3 n) {
         if (tn > tEnter) { tEnter = tn; axisEnter = i; }
         if (tf < tExit) { tExit = tf; axisExit = i; }
     }
-    n = vec3(0.0);
-    if (tEnter > tExit) return INF;
-    vec3 nl = vec3(0.0);
-    float t;
-    if (tEnter > tmin) { t = tEnter; nl[axisEnter] = -sign(d[axisEnter]); }
-    else if (tExit > tmin) { t = tExit; nl[axisExit] = sign(d[axisExit]); }
-    else return INF;
-    if (t >= tmax) return INF;
-    n = transpose(localFromWorld) * nl;
-    return t;
+    return boxHitFromSlabs(tEnter, tExit, axisEnter, axisExit, d, localFromWorld, tmin, tmax, n);
 }
 #endif
 
