@@ -20,12 +20,92 @@ uniform vec3 camUp;            // up * tan(fov/2)
 
 out vec4 fragColor;
 
+
 #if defined(VIEW_MODE) && VIEW_MODE == 3
 int rayCount = 0;           // the cost view: rays traced for this pixel sample
 #define COUNT_RAY() (++rayCount)
 #else
 #define COUNT_RAY()
 #endif
+
+// ---------------------------------------------------------------- the objects
+
+// FOR_EACH_OBJECT(X) expands to X(k, shape, slot) for every object k (slot:
+// its transparent slot, -1 for an opaque object) and FOR_EACH_MEDIUM(X) to
+// X(slot, k, shape) for every transparent object in slot order.  In the
+// specialised shader both are straight lines of literal arguments
+// (SCENE_OBJECTS and SCENE_MEDIA from viewer/gpu_scene.py): every object test
+// compiles to its own primitive's code, with no loop, no switch on the type
+// and only constant indices into local arrays (a software rasteriser spills
+// dynamically indexed arrays to memory).  The generic shader loops and reads
+// the same values from the block at run time.
+#ifdef GENERIC
+#define FOR_EACH_OBJECT(X) for (int k_ = 0; k_ < NUM_OBJECTS; ++k_) { X(k_, runtimeShape(objects[k_]), objects[k_].info.w) }
+#define FOR_EACH_OBJECT_UNTIL(X, DONE) for (int k_ = 0; k_ < NUM_OBJECTS; ++k_) { X(k_, runtimeShape(objects[k_]), objects[k_].info.w) if (DONE) break; }
+#define FOR_EACH_MEDIUM(X) for (int s_ = 0; s_ < NUM_TRANSPARENT; ++s_) { X(s_, media[s_].x, runtimeShape(objects[media[s_].x])) }
+#else
+#define FOR_EACH_OBJECT(X) SCENE_OBJECTS(X)
+#define FOR_EACH_OBJECT_UNTIL(X, DONE) SCENE_OBJECTS(X)
+#define FOR_EACH_MEDIUM(X) SCENE_MEDIA(X)
+#endif
+
+// What one sweep over all objects found along o + t d, tmin < t < tmax.
+struct Hits {
+    float tNear;     // the nearest surface of any object (INF: none)
+    float tOpaque;   // the nearest opaque surface (lowest index on a tie) ...
+    vec3 nOpaque;    // ... its unit outward normal ...
+    int kOpaque;     // ... and its object (-1: none)
+};
+
+#ifdef HAS_DIELECTRIC
+// Per transparent slot, the last sweep's t and (specialised shader only)
+// outward normal.  Globals, not parameters: GLSL copies an inout array into
+// and out of every call.  The generic shader indexes them at run time, which
+// puts them in memory, so it keeps no normals there and intersects a
+// crossing's object again instead.
+float slotT[MEDIA_LEN];
+#ifndef GENERIC
+vec3 slotN[MEDIA_LEN];
+#endif
+#endif
+
+void keepHit(int k, int slot, float t, vec3 n, inout Hits h) {
+    h.tNear = min(h.tNear, t);
+    if (slot < 0) {
+        if (t < h.tOpaque) { h.tOpaque = t; h.nOpaque = n; h.kOpaque = k; }
+    }
+#ifdef HAS_DIELECTRIC
+    else {
+        slotT[slot] = t;
+#ifndef GENERIC
+        slotN[slot] = n;
+#endif
+    }
+#endif
+}
+
+// One pass over the objects; every hit's normal is kept as it is found (a
+// normal nobody reads is never computed), so the nearest surface is not
+// intersected a second time.
+Hits sweep(vec3 o, vec3 d, float tmin, float tmax) {
+    Hits h = Hits(INF, INF, vec3(0.0), -1);
+#define SWEEP_OBJECT(k, shape, slot) { vec3 n; float t = hitShape(k, shape, o, d, tmin, tmax, n); keepHit(k, slot, t, n, h); }
+    FOR_EACH_OBJECT(SWEEP_OBJECT)
+#undef SWEEP_OBJECT
+    return h;
+}
+
+// The sweep of a shadow ray: it may stop at the first opaque hit before
+// tmax, which blocks the light whatever else lies on the way.  Only a loop
+// can stop (when all of its SIMD lanes are done), so the straight-line
+// specialised sweep always runs to the end.
+Hits sweepShadow(vec3 o, vec3 d, float tmin, float tmax) {
+    Hits h = Hits(INF, INF, vec3(0.0), -1);
+#define SWEEP_OBJECT(k, shape, slot) { vec3 n; float t = hitShape(k, shape, o, d, tmin, tmax, n); keepHit(k, slot, t, n, h); }
+    FOR_EACH_OBJECT_UNTIL(SWEEP_OBJECT, h.tOpaque < tmax)
+#undef SWEEP_OBJECT
+    return h;
+}
 
 // ---------------------------------------------------------------- media
 
@@ -53,6 +133,34 @@ float surfaceEps(vec3 p) {
     return params.x + params.y * max(a.x, max(a.y, a.z));
 }
 
+#ifdef HAS_DIELECTRIC
+// A crossing of the group of transparent surfaces hit at t <= tGroup (the
+// last sweep's): the media on its far side, found by point-in-solid tests
+// at `probe` just past it, and the group's first (lowest index) object with
+// its outward normal (specialised shader only).
+struct Crossing { uint after; int object; vec3 n; };
+
+void probeSlot(int slot, int k, int shape, vec3 probe, float tGroup, inout Crossing c) {
+    if (slotT[slot] <= tGroup) {
+        uint bit = 1u << uint(slot);
+        c.after = insideShape(k, shape, probe) ? (c.after | bit) : (c.after & ~bit);
+#ifdef GENERIC
+        if (c.object < 0) c.object = k;
+#else
+        if (c.object < 0) { c.object = k; c.n = slotN[slot]; }
+#endif
+    }
+}
+
+Crossing crossGroup(vec3 probe, float tGroup, uint mask) {
+    Crossing c = Crossing(mask, -1, vec3(0.0));
+#define PROBE_SLOT(slot, k, shape) probeSlot(slot, k, shape, probe, tGroup, c);
+    FOR_EACH_MEDIUM(PROBE_SLOT)
+#undef PROBE_SLOT
+    return c;
+}
+#endif
+
 // ---------------------------------------------------------------- walking a ray
 
 struct Interaction {
@@ -74,56 +182,46 @@ struct Interaction {
 bool nextInteraction(vec3 o, vec3 d, inout uint mask, inout vec3 atten, out Interaction it) {
     COUNT_RAY();
     it.p = vec3(0.0); it.n = vec3(0.0); it.object = -1; it.dielectric = false; it.maskAfter = mask;
+#ifndef HAS_DIELECTRIC
+    // Every object is opaque and the ray is in air: the interaction is the
+    // nearest hit, found in a single pass.
+    float tmin = surfaceEps(o);
+    Hits h = sweep(o, d, tmin, INF);
+    if (h.tOpaque >= INF) return false;
+    it.p = o + h.tOpaque * d; it.n = h.nOpaque; it.object = h.kOpaque;
+    return true;
+#else
     for (int pass = 0; pass < 2 * NUM_OBJECTS + 2; ++pass) {
         float tmin = surfaceEps(o);
-        float tk[OBJECTS_LEN];
-        float tNear = INF;
-        vec3 unused;
-        for (int k = 0; k < NUM_OBJECTS; ++k) {
-            tk[k] = hitObject(k, o, d, tmin, INF, unused);
-            tNear = min(tNear, tk[k]);
-        }
+        Hits h = sweep(o, d, tmin, INF);
         vec3 a = absorptionOf(mediumOf(mask));
-        if (tNear >= INF) {
+        if (h.tNear >= INF) {
             atten *= exp(-a * INF);     // escaping through an absorbing medium: nothing left
             return false;
         }
-        vec3 p = o + tNear * d;
-        float tGroup = tNear + surfaceEps(p);
-        int opaque = -1;
-        float tOpaque = INF;
-        for (int k = 0; k < NUM_OBJECTS; ++k)
-            if (objects[k].info.w < 0 && tk[k] <= tGroup && tk[k] < tOpaque) { opaque = k; tOpaque = tk[k]; }
-        if (opaque >= 0) {
-            atten *= exp(-a * tOpaque);
-            it.p = o + tOpaque * d; it.object = opaque; it.dielectric = false;
-            hitObject(opaque, o, d, tmin, INF, it.n);
+        vec3 p = o + h.tNear * d;
+        float tGroup = h.tNear + surfaceEps(p);
+        if (h.tOpaque <= tGroup) {
+            atten *= exp(-a * h.tOpaque);
+            it.p = o + h.tOpaque * d; it.n = h.nOpaque; it.object = h.kOpaque;
             return true;
         }
-        atten *= exp(-a * tNear);
-#ifdef HAS_DIELECTRIC
-        // Which transparent solids hold the point just past the crossing.
-        vec3 probe = p + 2.0 * surfaceEps(p) * d;
-        uint after = mask;
-        int first = -1;
-        for (int k = 0; k < NUM_OBJECTS; ++k) {
-            int slot = objects[k].info.w;
-            if (slot >= 0 && tk[k] <= tGroup) {
-                uint bit = 1u << uint(slot);
-                after = insideObject(k, probe) ? (after | bit) : (after & ~bit);
-                if (first < 0) first = k;
-            }
-        }
-        if (mediumOf(after) != mediumOf(mask)) {
-            it.p = p; it.object = first; it.dielectric = true; it.maskAfter = after;
-            hitObject(first, o, d, tmin, INF, it.n);
-            return true;
-        }
-        mask = after;
+        atten *= exp(-a * h.tNear);
+        Crossing c = crossGroup(p + 2.0 * surfaceEps(p) * d, tGroup, mask);
+        if (mediumOf(c.after) != mediumOf(mask)) {
+            it.p = p; it.object = c.object; it.dielectric = true; it.maskAfter = c.after;
+#ifdef GENERIC
+            hitObject(c.object, o, d, tmin, INF, it.n);     // the sweep kept no transparent normals
+#else
+            it.n = c.n;
 #endif
+            return true;
+        }
+        mask = c.after;
         o = p;
     }
     return false;   // pathological stack of coincident surfaces: treat as escaped
+#endif
 }
 
 // Fraction of light j that reaches p (no refraction on shadow rays): 0 at an
@@ -131,45 +229,32 @@ bool nextInteraction(vec3 o, vec3 d, inout uint mask, inout vec3 atten, out Inte
 // along every stretch inside a medium.
 vec3 shadowTransmittance(vec3 p, vec3 l, float dist, uint mask) {
     COUNT_RAY();
+#ifndef HAS_DIELECTRIC
+    // Only opaque objects, in air: any hit before the light blocks it (the
+    // normals the sweep would keep are never read, so never computed).
+    return sweepShadow(p, l, surfaceEps(p), dist).tOpaque < dist ? vec3(0.0) : vec3(1.0);
+#else
     vec3 v = vec3(1.0);
     vec3 o = p;
     float left = dist;
     for (int pass = 0; pass < 2 * NUM_OBJECTS + 2; ++pass) {
-        float tmin = surfaceEps(o);
-        float tk[OBJECTS_LEN];
-        float tNear = INF;
-        vec3 unused;
-        for (int k = 0; k < NUM_OBJECTS; ++k) {
-            tk[k] = hitObject(k, o, l, tmin, left, unused);
-            // any opaque surface before the light blocks it: stop at the first
-            if (tk[k] < left && objects[k].info.w < 0) return vec3(0.0);
-            tNear = min(tNear, tk[k]);
-        }
+        Hits h = sweepShadow(o, l, surfaceEps(o), left);
+        // any opaque surface before the light blocks it
+        if (h.tOpaque < left) return vec3(0.0);
         vec3 a = absorptionOf(mediumOf(mask));
-        if (tNear >= left) return v * exp(-a * min(left, INF));
-        vec3 q = o + tNear * l;
-        float tGroup = tNear + surfaceEps(q);
-        v *= exp(-a * tNear);
-#ifdef HAS_DIELECTRIC
-        vec3 probe = q + 2.0 * surfaceEps(q) * l;
-        uint after = mask;
-        int first = -1;
-        for (int k = 0; k < NUM_OBJECTS; ++k) {
-            int slot = objects[k].info.w;
-            if (slot >= 0 && tk[k] <= tGroup) {
-                uint bit = 1u << uint(slot);
-                after = insideObject(k, probe) ? (after | bit) : (after & ~bit);
-                if (first < 0) first = k;
-            }
-        }
-        if (mediumOf(after) != mediumOf(mask)) v *= materials[objects[first].info.y].dielectric.x;
-        mask = after;
-#endif
+        if (h.tNear >= left) return v * exp(-a * min(left, INF));
+        vec3 q = o + h.tNear * l;
+        float tGroup = h.tNear + surfaceEps(q);
+        v *= exp(-a * h.tNear);
+        Crossing c = crossGroup(q + 2.0 * surfaceEps(q) * l, tGroup, mask);
+        if (mediumOf(c.after) != mediumOf(mask)) v *= materials[objects[c.object].info.y].dielectric.x;
+        mask = c.after;
         if (maxComponent(v) <= 0.0) return vec3(0.0);
         o = q;
-        left -= tNear;
+        left -= h.tNear;
     }
     return v;
+#endif
 }
 
 // ---------------------------------------------------------------- shading
@@ -228,50 +313,74 @@ vec3 shadeLocal(Material m, Surface s, vec3 p, vec3 n, vec3 v, uint mask) {
 
 struct Branch { vec3 o; vec3 d; vec3 w; int depth; uint mask; };
 
-vec3 radiance(vec3 origin, vec3 dir) {
-    Branch stack[STACK_SIZE];
-    int sp = 0;
-    stack[sp++] = Branch(origin, dir, vec3(1.0), 1, uint(iparams.y));
-    float minWeight = params.z;
-    int maxDepth = iparams.x;
-    vec3 sum = vec3(0.0);
-    while (sp > 0) {
-        Branch br = stack[--sp];
-        uint mask = br.mask;
-        vec3 atten = vec3(1.0);
-        Interaction it;
-        bool hit = nextInteraction(br.o, br.d, mask, atten, it);
-        vec3 w = br.w * atten;
-        if (!hit) { sum += w * skyRadiance(br.d); continue; }
-        if (maxComponent(w) <= 0.0) continue;
-        Material m = materials[objects[it.object].info.y];
-        vec3 n = dot(it.n, br.d) < 0.0 ? it.n : -it.n;     // facing the ray
-        Surface s = surfaceAt(m, it.p);
-        sum += w * shadeLocal(m, s, it.p, n, -br.d, mask);
-        if (br.depth >= maxDepth) continue;                 // children would exceed max_depth
-        vec3 mirror = reflect(br.d, n);
+// A child is followed when its weight reaches min_weight (and is not zero).
+bool worthFollowing(vec3 w, float minWeight) {
+    return maxComponent(w) >= minWeight && maxComponent(w) > 0.0;
+}
+
+// One node of the ray tree: adds the light it sends back along br.d to `sum`
+// and returns its children, the reflected and the refracted branch (weight
+// zero where there is none).
+void walkNode(Branch br, inout vec3 sum, out Branch reflected, out Branch refracted) {
+    reflected = Branch(vec3(0.0), vec3(0.0), vec3(0.0), 0, 0u);
+    refracted = reflected;
+    uint mask = br.mask;
+    vec3 atten = vec3(1.0);
+    Interaction it;
+    bool hit = nextInteraction(br.o, br.d, mask, atten, it);
+    vec3 w = br.w * atten;
+    if (!hit) { sum += w * skyRadiance(br.d); return; }
+    if (maxComponent(w) <= 0.0) return;
+    Material m = materials[objects[it.object].info.y];
+    vec3 n = dot(it.n, br.d) < 0.0 ? it.n : -it.n;     // facing the ray
+    Surface s = surfaceAt(m, it.p);
+    sum += w * shadeLocal(m, s, it.p, n, -br.d, mask);
+    if (br.depth >= iparams.x) return;                  // children would exceed max_depth
 #ifdef HAS_DIELECTRIC
-        if (it.dielectric) {
-            float n1 = iorOf(mediumOf(mask));
-            float n2 = iorOf(mediumOf(it.maskAfter));
-            float cosI = -dot(br.d, n);
-            float cosT;
-            float R = fresnelDielectric(cosI, n1, n2, cosT);
-            vec3 wt = w * ((1.0 - R) * m.dielectric.x);
-            vec3 wr = w * R;
-            // Push refraction first so reflection is walked first; the order
-            // does not change the sum.
-            if (maxComponent(wt) >= minWeight && maxComponent(wt) > 0.0 && sp < STACK_SIZE)
-                stack[sp++] = Branch(it.p, refractDir(br.d, n, n1 / n2, cosI, cosT), wt, br.depth + 1, it.maskAfter);
-            if (maxComponent(wr) >= minWeight && maxComponent(wr) > 0.0 && sp < STACK_SIZE)
-                stack[sp++] = Branch(it.p, mirror, wr, br.depth + 1, mask);
-            continue;
-        }
+    if (it.dielectric) {
+        float n1 = iorOf(mediumOf(mask));
+        float n2 = iorOf(mediumOf(it.maskAfter));
+        float cosI = -dot(br.d, n);
+        float cosT;
+        float R = fresnelDielectric(cosI, n1, n2, cosT);
+        refracted = Branch(it.p, refractDir(br.d, n, n1 / n2, cosI, cosT), w * ((1.0 - R) * m.dielectric.x),
+                           br.depth + 1, it.maskAfter);
+        reflected = Branch(it.p, reflect(br.d, n), w * R, br.depth + 1, mask);
+        return;
+    }
 #endif
 #ifdef HAS_REFLECTION
-        vec3 wr = w * m.phong.w;
-        if (maxComponent(wr) >= minWeight && maxComponent(wr) > 0.0 && sp < STACK_SIZE)
-            stack[sp++] = Branch(it.p, mirror, wr, br.depth + 1, mask);
+    reflected = Branch(it.p, reflect(br.d, n), w * m.phong.w, br.depth + 1, mask);
+#endif
+}
+
+// The ray tree, walked depth-first with the reflected child first (the order
+// does not change the sum): a node's reflected child is walked next and its
+// refracted child waits on the stack, so a node pushes at most one branch and
+// max_depth + 1 entries are more than enough.  A scene with no glass has
+// chains only (no stack); one with no reflection either, the camera ray only.
+vec3 radiance(vec3 origin, vec3 dir) {
+#ifdef HAS_DIELECTRIC
+    Branch stack[STACK_SIZE];
+    int sp = 0;
+#endif
+    float minWeight = params.z;
+    vec3 sum = vec3(0.0);
+    Branch br = Branch(origin, dir, vec3(1.0), 1, uint(iparams.y));
+    for (bool walking = true; walking; ) {
+        Branch reflected, refracted;
+        walkNode(br, sum, reflected, refracted);
+        bool followR = worthFollowing(reflected.w, minWeight);
+#ifdef HAS_DIELECTRIC
+        bool followT = worthFollowing(refracted.w, minWeight);
+        if (followR && followT && sp < STACK_SIZE) stack[sp++] = refracted;
+        if (followR) br = reflected;
+        else if (followT) br = refracted;
+        else if (sp > 0) br = stack[--sp];
+        else walking = false;
+#else
+        br = reflected;
+        walking = followR;
 #endif
     }
     return sum;

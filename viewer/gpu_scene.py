@@ -117,9 +117,36 @@ class PackedScene:
     eye: np.ndarray  # world position of the eye (float64)
 
 
+# The compile-time shape of an object (shaders/lib/intersect.glsl): its type,
+# and SHAPE_VESSEL for a cylinder with a wall.
+SHAPE_VESSEL = 4
+
+
+def object_shape(obj: SceneObject) -> int:
+    return SHAPE_VESSEL if obj.type == "cylinder" and obj.wall else OBJ_TYPES[obj.type]
+
+
+def object_list_macros(scene: Scene) -> dict[str, str]:
+    """The scene's objects as X-macros for the specialised shader (see
+    FOR_EACH_OBJECT in trace.frag): SCENE_OBJECTS(X) lists X(k, shape, slot)
+    per object (slot: transparent slot, -1 opaque), SCENE_MEDIA(X) lists
+    X(slot, k, shape) per transparent object.  Only the structure (shapes,
+    order, which objects are transparent) goes in: every value stays in the
+    uniform block, so editing one never recompiles."""
+    objects, media = [], []
+    for k, o in enumerate(scene.objects):
+        shape = object_shape(o)
+        slot = len(media) if scene.is_transparent(o) else -1
+        if slot >= 0:
+            media.append(f"X({slot},{k},{shape})")
+        objects.append(f"X({k},{shape},{slot})")
+    return {"SCENE_OBJECTS(X)": " ".join(objects), "SCENE_MEDIA(X)": " ".join(media)}
+
+
 def shader_defines(scene: Scene, specialise: bool = True, fresnel: str = "exact") -> dict[str, object]:
-    """Compile-time constants of the shader for this scene: counts and the
-    features present (specialise=True), or the generic all-features shader."""
+    """Compile-time constants of the shader for this scene: counts, the
+    features present and the object list (specialise=True), or the generic
+    all-features shader."""
     extra: dict[str, object] = {"FRESNEL_SCHLICK": True} if fresnel == "schlick" else {}
     if not specialise:
         return {"GENERIC": True, **GENERIC_LENS, "STACK_SIZE": GENERIC_STACK, "HAS_LIGHTS": True,
@@ -134,6 +161,7 @@ def shader_defines(scene: Scene, specialise: bool = True, fresnel: str = "exact"
         "NUM_LIGHTS": len(scene.lights), "LIGHTS_LEN": max(1, len(scene.lights)),
         "NUM_TRANSPARENT": n_tr, "MEDIA_LEN": max(1, n_tr),
         "STACK_SIZE": scene.render.max_depth + 1,
+        **object_list_macros(scene),
         **extra,
     }
     if scene.lights:

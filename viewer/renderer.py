@@ -64,13 +64,18 @@ class Renderer:
         self._update_sky(scene)
         self.scene = scene
 
-    def _program(self, defines: dict) -> moderngl.Program:
-        key = tuple(sorted(defines.items()))
+    def _program(self, defines: dict, vertex: str = "fullscreen.vert") -> moderngl.Program:
+        key = (vertex, *sorted(defines.items()))
         prog = self._programs.get(key)
         if prog is None:
-            prog = build_program(self.ctx, defines=defines)
+            prog = build_program(self.ctx, vertex=vertex, defines=defines)
             self._programs[key] = prog
         return prog
+
+    def variant(self, vertex: str = "fullscreen.vert", **defines) -> moderngl.Program:
+        """The current scene's program with extra defines (cached like the
+        main one): the adaptive sampler's ADAPTIVE variant, the debug views."""
+        return self._program({**self._defines, **defines}, vertex)
 
     def _update_sky(self, scene: Scene) -> None:
         path = scene.sky.image_path if scene.sky.type == "image" else None
@@ -97,28 +102,28 @@ class Renderer:
 
     # ------------------------------------------------------------ drawing
 
-    def _set(self, name: str, value) -> None:
-        if name in self.program:
-            self.program[name].value = value
-
     def draw_sample(self, width: int, height: int, offset: tuple[float, float],
                     viewport: tuple[int, int, int, int] | None = None) -> None:
         """Trace one sample per pixel of the bound framebuffer (additively if
         blending is on).  viewport limits the work to a rectangle (x, y, w, h)
         in framebuffer pixels, bottom-left origin."""
-        prog = self.program
-        block_index = prog["SceneBlock"]
-        block_index.binding = 0
-        self._ubo.bind_to_uniform_block(0)
-        self._sky.use(location=0)
-        self._set("skyImage", 0)
-        self._set("imageSize", (float(width), float(height)))
-        self._set("sampleOffset", (float(offset[0]), float(offset[1])))
-        for name, v in camera_uniforms(self.scene, width, height).items():
-            self._set(name, v)
+        self.bind(self.program, width, height, offset)
         self.ctx.scissor = viewport
         self._vao().render(moderngl.TRIANGLES, vertices=3)
         self.ctx.scissor = None
+
+    def bind(self, prog: moderngl.Program, width: int, height: int, offset: tuple[float, float]) -> None:
+        """Bind the scene block, the sky (texture unit 0) and the per-draw
+        uniforms of one sample to `prog` (a variant of the scene's program)."""
+        prog["SceneBlock"].binding = 0
+        self._ubo.bind_to_uniform_block(0)
+        self._sky.use(location=0)
+        values = {"skyImage": 0, "imageSize": (float(width), float(height)),
+                  "sampleOffset": (float(offset[0]), float(offset[1])),
+                  **camera_uniforms(self.scene, width, height)}
+        for name, v in values.items():
+            if name in prog:
+                prog[name].value = v
 
     def tiles(self, width: int, height: int) -> list[tuple[int, int, int, int]]:
         t = self.tile
@@ -174,7 +179,7 @@ class Renderer:
     def _debug_pass(self, mode: int, width: int, height: int, offset) -> np.ndarray:
         """One sample of a VIEW_MODE variant of the shader, (H, W, 4) top row first."""
         main = self.program
-        self.program = self._program({**self._defines, "VIEW_MODE": mode})
+        self.program = self.variant(VIEW_MODE=mode)
         fbo = self.ctx.simple_framebuffer((width, height), components=4, dtype="f4")
         try:
             fbo.use()

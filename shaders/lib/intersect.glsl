@@ -6,8 +6,14 @@
 
 const float INF = 1e30;
 
-void keepNearest(float t, vec3 n, float tmin, inout float best, inout vec3 bestN) {
-    if (t > tmin && t < best) { best = t; bestN = n; }
+// The nearest hit on a cylinder's surfaces so far: t, and what its normal
+// needs: a side's radius r and s = +1 (outer side) or -1 (inner side, the
+// normal points to the axis), or r = 0 and s = the normal's y for a cap.
+// The normal is computed once, for the nearest surface (cylinderNormal).
+struct CylinderHit { float t; float r; float s; };
+
+void keepSurface(float t, float r, float s, float tmin, inout CylinderHit best) {
+    if (t > tmin && t < best.t) best = CylinderHit(t, r, s);
 }
 
 #ifdef NAIVE_INTERSECT
@@ -136,7 +142,7 @@ vec3 toAxisFrame(vec3 v, int axis) {
 // Textbook side: a t^2 + b t + c = 0 with disc = b^2 - 4ac and roots
 // (-b +- sqrt(disc)) / 2a; no guard for rays parallel to the axis (a = 0).
 void cylinderSide(vec3 p, vec3 d, float r, float y0, float y1, bool inward, float tmin,
-                  inout float best, inout vec3 bestN) {
+                  inout CylinderHit best) {
     float a = d.x * d.x + d.z * d.z;
     float b = 2.0 * (p.x * d.x + p.z * d.z);
     float c = p.x * p.x + p.z * p.z - r * r;
@@ -149,17 +155,14 @@ void cylinderSide(vec3 p, vec3 d, float r, float y0, float y1, bool inward, floa
     for (int i = 0; i < 2; ++i) {
         float t = roots[i];
         float y = p.y + t * d.y;
-        if (y >= y0 && y <= y1) {
-            vec3 nr = vec3(p.x + t * d.x, 0.0, p.z + t * d.z) / r;
-            keepNearest(t, inward ? -nr : nr, tmin, best, bestN);
-        }
+        if (y >= y0 && y <= y1) keepSurface(t, r, inward ? -1.0 : 1.0, tmin, best);
     }
 }
 #else
 // Side of an infinite cylinder of radius r about local y, both roots, the
 // hits kept when their y lies in [y0, y1].  inward: the normal points to the axis.
 void cylinderSide(vec3 p, vec3 d, float r, float y0, float y1, bool inward, float tmin,
-                  inout float best, inout vec3 bestN) {
+                  inout CylinderHit best) {
     float a = d.x * d.x + d.z * d.z;
     if (a == 0.0) return;                      // parallel to the axis: no side hit
     float b = p.x * d.x + p.z * d.z;
@@ -175,10 +178,7 @@ void cylinderSide(vec3 p, vec3 d, float r, float y0, float y1, bool inward, floa
     for (int i = 0; i < 2; ++i) {
         float t = roots[i];
         float y = p.y + t * d.y;
-        if (y >= y0 && y <= y1) {
-            vec3 nr = vec3(p.x + t * d.x, 0.0, p.z + t * d.z) / r;
-            keepNearest(t, inward ? -nr : nr, tmin, best, bestN);
-        }
+        if (y >= y0 && y <= y1) keepSurface(t, r, inward ? -1.0 : 1.0, tmin, best);
     }
 }
 #endif
@@ -186,45 +186,55 @@ void cylinderSide(vec3 p, vec3 d, float r, float y0, float y1, bool inward, floa
 #ifdef NAIVE_INTERSECT
 // Textbook cap: no guard for rays parallel to the cap (t = +-inf or NaN).
 void cylinderCap(vec3 p, vec3 d, float y, float rIn, float rOut, float ny, float tmin,
-                 inout float best, inout vec3 bestN) {
+                 inout CylinderHit best) {
     float t = (y - p.y) / d.y;
     float x = p.x + t * d.x, z = p.z + t * d.z;
     float rho2 = x * x + z * z;
-    if (rho2 <= rOut * rOut && rho2 >= rIn * rIn) keepNearest(t, vec3(0.0, ny, 0.0), tmin, best, bestN);
+    if (rho2 <= rOut * rOut && rho2 >= rIn * rIn) keepSurface(t, 0.0, ny, tmin, best);
 }
 #else
 // Disc or annulus at local height y with rho in [rIn, rOut]; normal +-y.
 void cylinderCap(vec3 p, vec3 d, float y, float rIn, float rOut, float ny, float tmin,
-                 inout float best, inout vec3 bestN) {
+                 inout CylinderHit best) {
     if (d.y == 0.0) return;
     float t = (y - p.y) / d.y;
     float x = p.x + t * d.x, z = p.z + t * d.z;
     float rho2 = x * x + z * z;
-    if (rho2 <= rOut * rOut && rho2 >= rIn * rIn) keepNearest(t, vec3(0.0, ny, 0.0), tmin, best, bestN);
+    if (rho2 <= rOut * rOut && rho2 >= rIn * rIn) keepSurface(t, 0.0, ny, tmin, best);
 }
 #endif
 
-// Capped cylinder, or with wall > 0 the vessel: outer side, bottom, rim,
-// inner side and inner bottom.
-float hitCylinder(Object o, vec3 ro, vec3 rd, float tmin, float tmax, out vec3 n) {
+// The unit outward normal (axis frame) of the nearest surface; 0 for none.
+vec3 cylinderNormal(vec3 p, vec3 d, CylinderHit hit) {
+    if (hit.r > 0.0) {
+        // (x, 0, z) / r, without dividing the 0 (r > 0: the same +0)
+        vec3 nr = vec3((p.x + hit.t * d.x) / hit.r, 0.0, (p.z + hit.t * d.z) / hit.r);
+        return hit.s < 0.0 ? -nr : nr;
+    }
+    return vec3(0.0, hit.s, 0.0);
+}
+
+// Capped cylinder, or (hollow: wall > 0) the vessel: outer side, bottom, rim,
+// inner side and inner bottom.  `hollow` is a literal in the specialised
+// shader, so a solid cylinder compiles without the vessel's surfaces.
+float hitCylinder(Object o, bool hollow, vec3 ro, vec3 rd, float tmin, float tmax, out vec3 n) {
     int axis = o.info.z;
     vec3 p = toAxisFrame(ro - o.a.xyz, axis);
     vec3 d = toAxisFrame(rd, axis);
     float r = o.a.w, height = o.b.x, wall = o.b.y;
-    float best = tmax;
-    vec3 bestN = vec3(0.0);
-    cylinderSide(p, d, r, 0.0, height, false, tmin, best, bestN);
-    cylinderCap(p, d, 0.0, 0.0, r, -1.0, tmin, best, bestN);
-    if (wall > 0.0) {
+    CylinderHit best = CylinderHit(tmax, 0.0, 0.0);
+    cylinderSide(p, d, r, 0.0, height, false, tmin, best);
+    cylinderCap(p, d, 0.0, 0.0, r, -1.0, tmin, best);
+    if (hollow) {
         float ri = r - wall;
-        cylinderSide(p, d, ri, wall, height, true, tmin, best, bestN);
-        cylinderCap(p, d, wall, 0.0, ri, 1.0, tmin, best, bestN);
-        cylinderCap(p, d, height, ri, r, 1.0, tmin, best, bestN);
+        cylinderSide(p, d, ri, wall, height, true, tmin, best);
+        cylinderCap(p, d, wall, 0.0, ri, 1.0, tmin, best);
+        cylinderCap(p, d, height, ri, r, 1.0, tmin, best);
     } else {
-        cylinderCap(p, d, height, 0.0, r, 1.0, tmin, best, bestN);
+        cylinderCap(p, d, height, 0.0, r, 1.0, tmin, best);
     }
-    n = toAxisFrame(bestN, axis);
-    return best < tmax ? best : INF;
+    n = toAxisFrame(cylinderNormal(p, d, best), axis);
+    return best.t < tmax ? best.t : INF;
 }
 
 #ifdef NAIVE_INTERSECT
@@ -253,34 +263,62 @@ bool mayHitBound(vec4 bound, vec3 ro, vec3 rd, float tmin, float tmax) {
 }
 #endif
 
-float hitObject(int k, vec3 ro, vec3 rd, float tmin, float tmax, out vec3 n) {
-    Object o = objects[k];
-    int type = o.info.x;
+// Shapes: the object types, plus SHAPE_VESSEL for a cylinder with a wall.
+// The specialised shader passes each object's shape as a literal (see
+// FOR_EACH_OBJECT in trace.frag), so only that primitive's code is compiled
+// for it; the generic one passes the shape read from the block at run time.
+#define SHAPE_VESSEL 4
+
+bool isCylinder(int shape) { return shape == OBJ_CYLINDER || shape == SHAPE_VESSEL; }
+
+int runtimeShape(Object o) {
+    return (o.info.x == OBJ_CYLINDER && o.b.y > 0.0) ? SHAPE_VESSEL : o.info.x;
+}
+
+// The exact routine of `shape`, no bounding test.
+float hitShapeExact(Object o, int shape, vec3 ro, vec3 rd, float tmin, float tmax, out vec3 n) {
     n = vec3(0.0);
-    if (!mayHitBound(o.bound, ro, rd, tmin, tmax)) return INF;
 #ifdef HAS_PLANE
-    if (type == OBJ_PLANE) return hitPlane(o.a.x, ro, rd, tmin, tmax, n);
+    if (shape == OBJ_PLANE) return hitPlane(o.a.x, ro, rd, tmin, tmax, n);
 #endif
 #ifdef HAS_SPHERE
-    if (type == OBJ_SPHERE) return hitSphere(o.a.xyz, o.a.w, ro, rd, tmin, tmax, n);
+    if (shape == OBJ_SPHERE) return hitSphere(o.a.xyz, o.a.w, ro, rd, tmin, tmax, n);
 #endif
 #ifdef HAS_BOX
-    if (type == OBJ_BOX) return hitBox(o, ro, rd, tmin, tmax, n);
+    if (shape == OBJ_BOX) return hitBox(o, ro, rd, tmin, tmax, n);
 #endif
 #ifdef HAS_CYLINDER
-    if (type == OBJ_CYLINDER) return hitCylinder(o, ro, rd, tmin, tmax, n);
+    if (isCylinder(shape)) return hitCylinder(o, shape == SHAPE_VESSEL, ro, rd, tmin, tmax, n);
 #endif
     return INF;
 }
 
+// Object k.  The generic shader tests its bounding sphere first; the
+// specialised one goes straight to the exact routine: llvmpipe runs both
+// sides of every branch (its SIMD lanes follow a mask), so there the test
+// never skips the routine and only adds its own cost, 15-20% of a frame
+// (measured on the opaque benchmark scene and the default scene).
+float hitShape(int k, int shape, vec3 ro, vec3 rd, float tmin, float tmax, out vec3 n) {
+    Object o = objects[k];
+    n = vec3(0.0);
+#ifdef GENERIC
+    if (!mayHitBound(o.bound, ro, rd, tmin, tmax)) return INF;
+#endif
+    return hitShapeExact(o, shape, ro, rd, tmin, tmax, n);
+}
+
+// Object k with its run-time shape (the debug views).
+float hitObject(int k, vec3 ro, vec3 rd, float tmin, float tmax, out vec3 n) {
+    return hitShape(k, runtimeShape(objects[k]), ro, rd, tmin, tmax, n);
+}
+
 // Point-in-solid, strict (points on the surface count as outside).  Used to
 // decide which media lie on the far side of a crossing.
-bool insideObject(int k, vec3 p) {
+bool insideShape(int k, int shape, vec3 p) {
     Object o = objects[k];
-    int type = o.info.x;
-    if (type == OBJ_PLANE) return p.y < o.a.x;
-    if (type == OBJ_SPHERE) { vec3 q = p - o.a.xyz; return dot(q, q) < o.a.w * o.a.w; }
-    if (type == OBJ_BOX) {
+    if (shape == OBJ_PLANE) return p.y < o.a.x;
+    if (shape == OBJ_SPHERE) { vec3 q = p - o.a.xyz; return dot(q, q) < o.a.w * o.a.w; }
+    if (shape == OBJ_BOX) {
         mat3 localFromWorld = transpose(mat3(o.c.xyz, o.d.xyz, o.e.xyz));
         vec3 q = abs(localFromWorld * (p - o.a.xyz));
         return all(lessThan(q, o.b.xyz));
@@ -289,7 +327,7 @@ bool insideObject(int k, vec3 p) {
     float rho2 = q.x * q.x + q.z * q.z;
     float r = o.a.w, height = o.b.x, wall = o.b.y;
     bool inOuter = rho2 < r * r && q.y > 0.0 && q.y < height;
-    if (wall > 0.0) {
+    if (shape == SHAPE_VESSEL) {
         float ri = r - wall;
         bool inHollow = rho2 < ri * ri && q.y > wall;
         return inOuter && !inHollow;
