@@ -6,6 +6,9 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 APT_PACKAGES := libegl1 libegl-mesa0 libgl1-mesa-dri libosmesa6 xvfb xdotool
+# Wanted, not needed: libLLVM >= 16 lets the physically based peer (Mitsuba 3,
+# viewer/peer.py) run its fast llvm_ad_rgb variant instead of scalar_rgb.
+OPTIONAL_APT := libllvm19
 
 .PHONY: run test system-deps venv clean
 
@@ -20,7 +23,13 @@ system-deps:
 	  elif command -v sudo >/dev/null 2>&1 && command -v apt-get >/dev/null 2>&1; then \
 	    sudo apt-get update -qq && sudo DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $$missing >/dev/null; \
 	  else echo "warning: missing system packages:$$missing (install them with your package manager)"; fi; \
-	fi
+	fi; \
+	for p in $(OPTIONAL_APT); do dpkg -s $$p >/dev/null 2>&1 && continue; \
+	  if command -v apt-get >/dev/null 2>&1 && [ "$$(id -u)" = 0 ]; then \
+	    { DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $$p >/dev/null 2>&1 \
+	      || { apt-get update -qq >/dev/null 2>&1 && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $$p >/dev/null 2>&1; }; } \
+	      || echo "note: optional package $$p not installed (the Mitsuba peer falls back to scalar_rgb)"; fi; \
+	done
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)

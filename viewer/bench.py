@@ -698,6 +698,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "of the images); 0 for the plain definition")
     p.add_argument("--backend", choices=("auto", "egl", "osmesa"), default="auto",
                    help="OpenGL context: EGL, OSMesa, or EGL falling back to OSMesa (auto)")
+    p.add_argument("--peer", choices=("mitsuba",), default=None,
+                   help="instead of the sweep: glassray side by side with a physically based path tracer "
+                        "(Mitsuba 3: pip install 'glassray[peer]') on one scene that both draw identically "
+                        "(default whitted-exact): error against time, time to reach an error "
+                        "(peer.md, peer.csv, peer-time-to-error.csv, peer-machine.json, peer.png; see viewer/peer.py)")
 
 
 def _log(msg: str) -> None:
@@ -711,8 +716,13 @@ def run(args) -> int:
     if args.scene and args.scenes:
         print("glassray bench: give either SCENE or --scenes, not both", file=sys.stderr)
         return 2
+    peer = getattr(args, "peer", None)
+    if peer and args.scenes:
+        print("glassray bench: --peer compares on one SCENE, not --scenes", file=sys.stderr)
+        return 2
     names = [args.scene] if args.scene else (
-        [s.strip() for s in args.scenes.split(",") if s.strip()] if args.scenes else list(DEFAULT_SCENES))
+        [s.strip() for s in args.scenes.split(",") if s.strip()] if args.scenes else
+        (["whitted-exact"] if peer else list(DEFAULT_SCENES)))
     if not names:
         print("glassray bench: --scenes names no scene", file=sys.stderr)
         return 2
@@ -724,6 +734,14 @@ def run(args) -> int:
             if name in DEFAULT_SCENES and name not in builtin_scene_names():
                 e = SceneError(f"{name}: benchmark scene missing from this installation")
             print(f"glassray: {e}", file=sys.stderr)
+            return 2
+    if peer:
+        from .peer import PeerError, check_scene
+
+        try:
+            check_scene(scenes[0][1])
+        except PeerError as e:
+            print(f"glassray: {names[0]}: {e}", file=sys.stderr)
             return 2
     width, height = args.size
     ref_samples = args.reference_samples or (QUICK_REFERENCE_SAMPLES if args.quick else DEFAULT_REFERENCE_SAMPLES)
@@ -745,6 +763,10 @@ def run(args) -> int:
         print(f"glassray: {e}", file=sys.stderr)
         return 1
     try:
+        if peer:
+            from .peer import run_bench
+
+            return run_bench(args, ctx, backend, scenes[0][0], scenes[0][1], width, height, out, _log)
         return _run(args, ctx, backend, scenes, width, height, ref_samples, out)
     except KeyboardInterrupt:
         print("glassray: interrupted", file=sys.stderr)
