@@ -14,7 +14,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from viewer.camera import MAX_DISTANCE, MIN_DISTANCE, PITCH_LIMIT_DEG, OrbitCamera
-from viewer.controls import (HELP, LIGHT_FAST, LIGHT_STEP_FRACTION, ORBIT_RADIANS_PER_HEIGHT, ZOOM_PER_NOTCH,
+from viewer.controls import (EXTRA_HELP, HELP, HELP_ALL, VIEWS, LIGHT_FAST, LIGHT_STEP_FRACTION, ORBIT_RADIANS_PER_HEIGHT, ZOOM_PER_NOTCH,
                              Controls, merge_reloaded)
 from viewer.scene import load_scene, validate_camera
 
@@ -262,6 +262,28 @@ def test_window_actions(ctl):
     assert ctl.key("x") is None
 
 
+def test_v_cycles_the_view_and_shift_v_goes_back(ctl):
+    assert ctl.view == "image" and VIEWS == ("image", "cost", "normals", "depth", "objects")
+    seen = []
+    for _ in range(len(VIEWS)):
+        assert ctl.key("v") == "view"
+        seen.append(ctl.view)
+    assert seen == ["cost", "normals", "depth", "objects", "image"]
+    assert ctl.key("V", shift=True) == "view" and ctl.view == "objects"
+    assert ctl.key("v", repeat=True) is None and ctl.view == "objects"  # a held V does not spin
+    ctl.take_changed()
+    ctl.key("v")  # the view is not a scene change ...
+    assert not ctl.take_changed()  # ... so nothing is traced again for it
+    ctl.set_view("cost")
+    assert ctl.view == "cost"
+    with pytest.raises(ValueError):
+        ctl.set_view("colour")
+    # V is none of the spec's keys
+    spec_keys = " ".join(k for k, _ in HELP)
+    assert not re.search(r"\bV\b", spec_keys)
+    assert [k for k, _ in EXTRA_HELP] == ["V (shift+V: back)"]
+
+
 def test_reset_returns_to_the_starting_camera_and_light(ctl):
     start_cam = (ctl.scene.camera.position, ctl.scene.camera.target, ctl.scene.camera.fov)
     start_light = ctl.scene.lights[1].position
@@ -345,8 +367,9 @@ def test_help_and_readme_show_the_controls_of_the_spec():
     spec = norm(_table_rows((ROOT / "docs" / "cli.md").read_text(encoding="utf-8"), "Controls"))
     assert len(spec) == 12
     assert norm(HELP) == spec
+    assert HELP_ALL == HELP + EXTRA_HELP  # the help overlay: the spec's table, then the viewer's own keys
     readme = (ROOT / "README.md").read_text(encoding="utf-8")
-    assert norm(_table_rows(readme, "## Viewer")) == spec
+    assert norm(_table_rows(readme, "## Viewer")) in (spec, norm(HELP_ALL))
 
 
 def test_screenshot_names_count_up(tmp_path):

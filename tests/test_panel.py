@@ -45,6 +45,67 @@ def test_every_section_draws_without_changing_the_scene(ui, name):
     assert scene == before
 
 
+@pytest.mark.parametrize("view", ["image", "cost", "depth"])
+@pytest.mark.parametrize("max_error_on", [False, True])
+def test_view_combo_and_max_error_draw(ui, view, max_error_on):
+    """The view combo (V) and the "max error" setting: drawn in every state
+    (measuring, a pick) without touching the scene or raising a flag."""
+    import copy
+
+    from viewer.controls import VIEWS
+    from viewer.ui import Panel
+
+    scene = load_scene("default")
+    before = copy.deepcopy(scene)
+    panel = Panel(scene)
+    assert panel.view == "image" and panel.max_error_on is False and panel.max_error > 0  # off by default
+    panel.view, panel.max_error_on = view, max_error_on
+    for status in ("max error 0.02: measuring\u2026 37%", "max error 0.02: 8 spp, depth 6, w 0.001 (RMSE 0.0099)"):
+        panel.quality_status = status
+        for _ in range(3):
+            imgui.new_frame()
+            res = panel.draw(scene, (1280, 720))
+            imgui.render()
+            assert not (res.changed or res.view_changed or res.quality_changed or res.remeasure)
+    assert panel.view in VIEWS and panel.view == view
+    assert scene == before
+
+
+def test_view_combo_picks_a_view_with_the_mouse(ui):
+    """Clicking the combo, then its second entry, selects "cost" (the mouse
+    driven through ImGui's input events)."""
+    from viewer.ui import Panel
+
+    scene = load_scene("default")
+    panel = Panel(scene)
+    io = imgui.get_io()
+    picked = []
+
+    def frame(pos=None, down=False):
+        if pos is not None:
+            io.add_mouse_pos_event(*pos)
+        io.add_mouse_button_event(0, down)
+        imgui.new_frame()
+        res = panel.draw(scene, (1280, 720))
+        imgui.render()
+        if res.view_changed:
+            picked.append(panel.view)
+
+    for _ in range(3):
+        frame()
+    x0, y0, x1, y1 = panel.view_rect
+    centre = ((x0 + x1) / 2, (y0 + y1) / 2)
+    frame(centre, True)
+    frame(centre, False)  # the popup opens below the combo: one row per view
+    row = y1 - y0
+    entry = (centre[0], y1 + 1.5 * row)  # the second entry
+    for _ in range(2):
+        frame(entry, False)
+    frame(entry, True)
+    frame(entry, False)
+    assert picked == ["cost"] and panel.view == "cost"
+
+
 def test_save_scene_writes_toml_that_loads_to_the_same_scene(tmp_path):
     from viewer.ui import Panel
 

@@ -393,13 +393,68 @@ def test_viewer_session(xdisplay, tmp_path, gl):
         v.close()
 
 
+def cost_picture(tmp_path: Path, scene_file: Path, size=SIZE) -> np.ndarray:
+    """`glassray render --view cost` of the same camera and size, as the
+    window shows it: the legend strip in place of the picture's bottom rows."""
+    out = tmp_path / "cost-offscreen.png"
+    r = subprocess.run([sys.executable, "-m", "viewer", "render", str(scene_file), "-o", str(out), "--size",
+                        f"{size[0]}x{size[1]}", "--view", "cost"], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    with Image.open(out) as im:
+        ref = np.asarray(im.convert("RGB"))
+    h = size[1]
+    legend = ref[h:]
+    assert legend.shape[0] == 16
+    return np.concatenate([ref[:h - legend.shape[0]], legend])
+
+
+def test_v_shows_the_cost_view(xdisplay, tmp_path):
+    """V switches the window to the ray-cost heat map with its legend (the
+    picture of `glassray render --view cost`), then through the other views
+    back to the image."""
+    scene_file = tmp_path / "e2e.toml"
+    scene_file.write_text(SCENE)
+    run_dir = tmp_path / "run"
+    run_dir.mkdir()
+    v = Viewer(xdisplay, run_dir, str(scene_file), "--size", f"{SIZE[0]}x{SIZE[1]}", "--no-vsync")
+    try:
+        image = v.shot()
+        expected = cost_picture(tmp_path, scene_file)
+        v.key("v")
+        cost = v.shot()  # P in a debug view: its picture at full resolution
+        Image.fromarray(cost).save(tmp_path / "cost-p.png")
+        assert cost.shape == (SIZE[1], SIZE[0], 3)
+        assert_same_picture(cost, expected)
+        assert mismatch(cost, image) > 0.5
+        # the window shows it (F12: HUD included, so compare below and right of the HUD)
+        time.sleep(0.3)
+        window = v.shot("F12")
+        Image.fromarray(window).save(tmp_path / "cost-window.png")
+        below_hud = (slice(125, SIZE[1]), slice(0, SIZE[0]))  # the heat map's bottom and the legend
+        assert mismatch(window[below_hud], expected[below_hud]) < 0.01
+        # normals, depth, objects, then the image again
+        v.key("v")
+        normals = v.shot()
+        assert mismatch(normals, cost) > 0.3 and mismatch(normals, image) > 0.3
+        v.key("v", "v", "v")
+        assert_same_picture(v.shot(), image)
+        # shift+V goes back to objects
+        v.key("shift+v")
+        objects = v.shot()
+        assert mismatch(objects, image) > 0.3
+        assert v.quit() == 0
+        assert not any("Traceback" in e for e in v.stderr), "\n".join(v.stderr)
+    finally:
+        v.close()
+
+
 def test_soak_keeps_memory_and_gl_objects_flat(xdisplay, tmp_path):
     """A few thousand frames with the camera and light moving, the panel and
     the help toggling and the window resizing (the hidden --soak option):
     the host memory and the number of GL objects stay flat."""
     scene_file = tmp_path / "e2e.toml"
     scene_file.write_text(SCENE)
-    env = dict(os.environ, DISPLAY=xdisplay)
+    env = dict(os.environ, DISPLAY=xdisplay, XDG_CACHE_HOME=str(tmp_path / "cache"))
     r = subprocess.run([sys.executable, "-m", "viewer", str(scene_file), "--size", "64x36", "--no-vsync",
                         "--soak", "2000"], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=240)
     assert r.returncode == 0, r.stderr
@@ -409,6 +464,9 @@ def test_soak_keeps_memory_and_gl_objects_flat(xdisplay, tmp_path):
     assert frames == 2000
     assert gl1 == gl0, r.stdout
     assert rss1 - rss0 < 8 * 1024, f"host memory grew by {rss1 - rss0} KB over the soak"
+    # "max error" was switched on at frame 60: measured (in steps, between frames) and applied
+    assert "max-error 0.02:" in r.stderr and "cache miss" in r.stderr, r.stderr
+    assert list((tmp_path / "cache" / "glassray" / "quality").glob("*.json"))
 
 
 def test_no_display_server_fails_with_a_hint(tmp_path):
@@ -439,6 +497,11 @@ def test_viewer_runs_without_imgui(xdisplay, tmp_path):
     try:
         img = v.shot()
         assert img.shape == (90, 160, 3)
+        v.key("v")
+        deadline = time.monotonic() + 20
+        while "view: cost" not in v.xdo("getwindowname", v.wid) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert "view: cost" in v.xdo("getwindowname", v.wid)  # the HUD (here the title) names the view
         v.key("Tab")
         v.key("h")
         line = v.next_line()

@@ -38,7 +38,7 @@ import glfw  # noqa: E402
 import moderngl  # noqa: E402
 import numpy as np  # noqa: E402
 
-from .controls import HELP, Controls, merge_reloaded  # noqa: E402
+from .controls import HELP_ALL, VIEWS, Controls, merge_reloaded  # noqa: E402
 from .progressive import Progressive  # noqa: E402
 from .renderer import Renderer  # noqa: E402
 from .scene import Scene, SceneError  # noqa: E402
@@ -54,8 +54,13 @@ ACCUMULATE_DISPLAY_S = 0.25
 IDLE_WAKE_S = 0.5
 #: How long a HUD message stays.
 MESSAGE_S = 4.0
+#: Time per frame given to measuring for "max error" (at least one pass).
+QUALITY_STEP_S = 0.05
+#: What the HUD says of each debug view.
+VIEW_NAMES = {"cost": "cost (rays traced per pixel)", "normals": "normals (first hit)",
+              "depth": "depth (first hit, log scale)", "objects": "objects (first hit)"}
 
-_KEYS = {getattr(glfw, f"KEY_{c.upper()}"): c for c in "wsadqerph"}
+_KEYS = {getattr(glfw, f"KEY_{c.upper()}"): c for c in "wsadqerphv"}
 _KEYS.update({getattr(glfw, f"KEY_{d}"): str(d) for d in range(1, 10)})
 _KEYS.update({getattr(glfw, f"KEY_KP_{d}"): str(d) for d in range(1, 10)})
 _KEYS.update({glfw.KEY_TAB: "tab", glfw.KEY_F1: "f1", glfw.KEY_F5: "f5", glfw.KEY_F12: "f12",
@@ -199,6 +204,17 @@ class Viewer:
         self._want_window_shot = 0  # frames to draw before F12 reads the window back
         self.frames = 0
         self.panel = None
+        # debug views (V): the picture at debug_res, shown from debug_fbo
+        self.debug_tex = self.debug_fbo = None
+        self.debug_pic = None  # uint8 (H, W, 3), the window's picture
+        self.debug_res: tuple[int, int] | None = None
+        self.debug_dirty = True
+        # "max error" (viewer.quality): the measurement in progress, the pick
+        self.quality_job = None
+        self.quality_parts = None  # (cache, candidates) of the job
+        self.quality_choice = None
+        self.quality_saved = None  # render settings before the pick, restored when it is switched off
+        self.quality_status = ""
 
         self._setup_imgui()
         self._install_callbacks()
@@ -268,6 +284,8 @@ class Viewer:
         name = _KEYS.get(key)
         if name is None:
             return
+        if name in "123456789" and action == glfw.PRESS and self._quality_on():
+            self._quality_off("max error off: max depth set by key")
         act = self.controls.key(name, shift=bool(mods & glfw.MOD_SHIFT), repeat=action == glfw.REPEAT)
         if act is not None:
             self.actions.append(act)
@@ -353,8 +371,9 @@ class Viewer:
         return 0
 
     def _busy(self) -> bool:
-        return bool(self.need_preview or self.controls.changed or self.actions or self.ui_frames > 0
-                    or self.needs_display or self._want_window_shot)
+        return bool((self.need_preview and self.controls.view == "image") or self.controls.changed or self.actions or self.ui_frames > 0
+                    or self.needs_display or self._want_window_shot or self.quality_job is not None
+                    or (self.controls.view != "image" and self.debug_dirty))
 
     def _wait(self) -> None:
         if self.soak:
@@ -367,7 +386,7 @@ class Viewer:
         if self._busy():
             glfw.poll_events()
             return
-        if not self.prog.done:
+        if self._pending(fbw, fbh):
             left = self.last_change + SETTLE_S - time.perf_counter()
             if left > 0:
                 glfw.wait_events_timeout(left)
@@ -384,6 +403,13 @@ class Viewer:
         # idle: all samples done, nothing changed.  Sleep until an event (the
         # timeout only lets Python see a Ctrl-C now and then).
         glfw.wait_events_timeout(IDLE_WAKE_S)
+
+    def _pending(self, fbw: int, fbh: int) -> bool:
+        """Work left once the view is still: samples to accumulate, or the
+        debug view at full resolution."""
+        if self.controls.view == "image":
+            return not self.prog.done
+        return self.debug_dirty or self.debug_res != (fbw, fbh)
 
     def _say(self, text: str, error: bool = False) -> None:
         self.message = text
@@ -425,6 +451,8 @@ class Viewer:
                 self.reload()
             elif act == "screenshot":
                 want_shot = True
+            elif act == "view":
+                self._view_changed()
             elif act == "screenshot_window":
                 # ImGui shows a window that just opened one frame later: let the
                 # overlays settle for a frame, then read the window back
@@ -441,7 +469,14 @@ class Viewer:
             imgui.new_frame()
             if self.show_panel:
                 ds = imgui.get_io().display_size
+                self.panel.view = self.controls.view
+                self.panel.quality_status = self.quality_status
                 res = self.panel.draw(self.scene, (ds.x, ds.y))
+                if res.view_changed:
+                    self.controls.set_view(self.panel.view)
+                    self._view_changed()
+                if res.quality_changed or res.remeasure:
+                    self._quality_update(remeasure=res.remeasure)
                 if res.camera_changed:
                     self.controls.camera_edited()
                 if res.changed:
@@ -452,16 +487,24 @@ class Viewer:
         if self.controls.take_changed():
             self._apply_scene()
             self.need_preview = True
+            self.debug_dirty = True
             self.last_change = t0
 
+        if self.quality_job is not None:
+            self._quality_step()
+
         # trace: a preview right after a change, full-resolution bands once still
+        # (a debug view instead: its picture, reduced while things move)
         traced = previewed = False
-        if self.need_preview:
+        image_view = self.controls.view == "image"
+        if not image_view:
+            show_trace = self._debug_frame(t0, fbw, fbh)
+        elif self.need_preview:
             self.prog.render_preview(max(5.0, self.prog.target_ms - self.overhead_ms))
             self.need_preview = False
             traced = previewed = True
             show_trace = True
-        elif not self.prog.done and (self.soak or t0 - self.last_change >= SETTLE_S):
+        elif not self.prog.done and (self.soak or t0 - self.last_change >= SETTLE_S) and self.quality_job is None:
             passes = self.prog.passes_done
             self.prog.accumulate(self.prog.target_ms)
             traced = True
@@ -479,14 +522,17 @@ class Viewer:
 
         draw = show_trace or self.needs_display or self.ui_frames > 0 or self._want_window_shot
         if draw:
-            self.prog.display(self.ctx.screen, (0, 0, fbw, fbh))
+            if image_view or self.debug_fbo is None:
+                self.prog.display(self.ctx.screen, (0, 0, fbw, fbh))
+            else:
+                self.ctx.copy_framebuffer(self.ctx.screen, self.debug_fbo)
         if ui:
             if draw:
                 self._draw_overlays()
             imgui.render()
             if draw:
                 imgui.backends.opengl3_render_draw_data(imgui.get_draw_data())
-        elif draw and (t0 - self._title_t > 0.25 or self.prog.done):
+        elif draw and (t0 - self._title_t > 0.25 or not self._pending(fbw, fbh)):
             glfw.set_window_title(win, self._title(self.scene) + "  |  " + "  |  ".join(self._hud_lines()))
             self._title_t = t0
         if self._want_window_shot and draw:
@@ -513,13 +559,20 @@ class Viewer:
                 self._fps_count, self._fps_t0 = 0, t1
 
     def _hud_lines(self) -> list[str]:
+        q = [self.quality_status] if self._quality_on() and self.quality_status else []
+        if self.controls.view != "image":
+            rw, rh = self.debug_res or self.prog.size
+            return [f"{self.frame_ms:.1f} ms  {self.fps:.0f} fps",
+                    f"view: {VIEW_NAMES.get(self.controls.view, self.controls.view)}  (V: next)",
+                    f"{rw}x{rh}" + (" (preview)" if (rw, rh) != self.prog.size else ""),
+                    f"max depth {self.scene.render.max_depth}", *q]
         rw, rh = self.prog.active_resolution
         preview = (rw, rh) != self.prog.size
         done, total = self.prog.passes_done, self.prog.samples
         return [f"{self.frame_ms:.1f} ms  {self.fps:.0f} fps",
                 f"{rw}x{rh}" + (" (preview)" if preview else ""),
                 f"samples {done}/{total}" + ("" if done >= total else " ..."),
-                f"max depth {self.scene.render.max_depth}"]
+                f"max depth {self.scene.render.max_depth}", *q]
 
     def _draw_overlays(self) -> None:
         from .ui import draw_help, draw_hud
@@ -538,6 +591,139 @@ class Viewer:
         if self.show_help:
             ds = self.imgui.get_io().display_size
             self.show_help = draw_help((ds.x, ds.y))
+
+    # ------------------------------------------------------------ debug views (V)
+
+    def _view_changed(self) -> None:
+        self.debug_dirty = True
+        self.needs_display = True
+        if self.controls.view == "image":
+            self.need_preview = self.prog.passes_done == 0 and self.prog.next_row == 0
+        self._say(f"view: {self.controls.view}")
+
+    def _debug_frame(self, t0: float, fbw: int, fbh: int, force_full: bool = False) -> bool:
+        """Compute the debug view's picture when it is out of date: at a
+        reduced resolution while things move, at full resolution once still.
+        True when a new picture is ready."""
+        settled = force_full or bool(self.soak) or t0 - self.last_change >= SETTLE_S
+        if not self.debug_dirty and (self.debug_res == (fbw, fbh) or not settled):
+            return False
+        if settled:
+            size = (fbw, fbh)
+        else:
+            sc = self.prog.preview_scale(max(5.0, self.prog.target_ms - self.overhead_ms))
+            size = (max(1, round(fbw * sc)), max(1, round(fbh * sc)))
+        from .views import raw_view
+
+        with _releasing_attachments(self.ctx):
+            raw = raw_view(self.renderer, self.controls.view, *size)
+        pic = window_picture(self.controls.view, raw, fbw, fbh)
+        if self.debug_tex is None or self.debug_tex.size != (fbw, fbh):
+            self._release_debug()
+            self.debug_tex = self.ctx.texture((fbw, fbh), 3, alignment=1)
+            self.debug_fbo = self.ctx.framebuffer(color_attachments=[self.debug_tex])
+        self.debug_tex.write(np.ascontiguousarray(pic[::-1]).tobytes(), alignment=1)
+        self.debug_pic = pic
+        self.debug_res = size
+        self.debug_dirty = False
+        return True
+
+    def _release_debug(self) -> None:
+        for obj in (self.debug_fbo, self.debug_tex):
+            if obj is not None:
+                obj.release()
+        self.debug_fbo = self.debug_tex = None
+        self.debug_res = None
+        self.debug_dirty = True
+
+    # ------------------------------------------------------------ max error (viewer.quality)
+
+    def _quality_on(self) -> bool:
+        return self.panel is not None and self.panel.max_error_on
+
+    def _quality_update(self, remeasure: bool = False) -> None:
+        """The panel's "max error" changed: switched on (measure unless
+        cached, then apply the pick), off (restore the settings), a new
+        budget (pick again from the measurements), or "measure again"."""
+        from . import quality
+
+        if not self._quality_on():
+            self._quality_off("")
+            return
+        switched_on = self.quality_saved is None
+        if switched_on:
+            r = self.scene.render
+            self.quality_saved = (r.samples, r.max_depth, r.min_weight)
+        elif self.quality_job is not None and not remeasure:
+            return  # measuring: the pick uses the new budget when it is done
+        elif self.quality_parts is not None and not remeasure:
+            self._quality_finish()  # the same measurements, another budget
+            return
+        if self.quality_job is not None:
+            self.quality_job.close()
+        fbw, fbh = glfw.get_framebuffer_size(self.window)
+        scene = copy.deepcopy(self.scene)
+        if remeasure and self.quality_parts is not None:  # measure again: not from the cache
+            meas, cache, cands = quality.prepare(self.ctx, scene, max(1, fbw), max(1, fbh))
+            meas = quality.Measurement(self.ctx, scene, meas.layout, cands)
+        else:
+            meas, cache, cands = quality.prepare(self.ctx, scene, max(1, fbw), max(1, fbh))
+        self.quality_parts = (meas, cache, cands)
+        self.quality_job = None if meas.done else meas
+        if meas.done:
+            self._quality_finish()
+        else:
+            self.quality_status = f"max error {self.panel.max_error:.4g}: measuring\u2026 0%"
+            self._say("max error: measuring (once per scene and window size)")
+
+    def _quality_step(self) -> None:
+        job = self.quality_job
+        try:
+            done = job.step(QUALITY_STEP_S)
+        except Exception as e:
+            self.quality_job = self.quality_parts = None
+            self._quality_off("")
+            self._error(f"max error: measuring failed: {e}")
+            return
+        self.ui_frames = max(self.ui_frames, 1)
+        if done:
+            self.quality_job = None
+            self._quality_finish()
+        else:
+            self.quality_status = (f"max error {self.panel.max_error:.4g}: measuring\u2026 "
+                                   f"{100 * job.fraction:.0f}%")
+
+    def _quality_finish(self) -> None:
+        from . import quality
+
+        meas, cache, cands = self.quality_parts
+        choice = quality.finish(meas, cache, cands, self.panel.max_error)
+        self.quality_choice = choice
+        c = choice.measured.candidate
+        r = self.scene.render
+        if (r.samples, r.max_depth, r.min_weight) != (c.samples, c.max_depth, c.min_weight):
+            r.samples, r.max_depth, r.min_weight = c.samples, c.max_depth, c.min_weight
+            self.controls.changed = True
+        self.quality_status = (f"max error {choice.max_error:.4g}: " + ("" if choice.met else "not reached, ")
+                               + f"{c.samples} spp, depth {c.max_depth}, w {c.min_weight:g} "
+                               f"(RMSE {choice.measured.rmse:.3g})")
+        self._say(self.quality_status)
+        print(f"glassray: {choice.line()}", file=sys.stderr, flush=True)
+
+    def _quality_off(self, message: str) -> None:
+        if self.quality_job is not None:
+            self.quality_job.close()
+            self.quality_job = None
+        if self.panel is not None:
+            self.panel.max_error_on = False
+        if self.quality_saved is not None:
+            r = self.scene.render
+            r.samples, r.max_depth, r.min_weight = self.quality_saved
+            self.quality_saved = None
+            self.controls.changed = True
+        self.quality_status = ""
+        if message:
+            self._say(message)
 
     # ------------------------------------------------------------ scene changes
 
@@ -594,6 +780,9 @@ class Viewer:
         if self.panel is not None:
             self.panel.error = ""
         glfw.set_window_title(self.window, self._title(merged))
+        self.debug_dirty = True
+        if self._quality_on():
+            self._quality_update(remeasure=True)
         self.need_preview = True
         self.last_change = time.perf_counter()
         self._say("reloaded scene and shaders")
@@ -602,7 +791,20 @@ class Viewer:
     # ------------------------------------------------------------ screenshots
 
     def screenshot(self) -> None:
-        """P: the accumulated image (at least one full sample), no HUD or panel."""
+        """P: the accumulated image (at least one full sample), no HUD or panel;
+        in a debug view its picture at full resolution."""
+        if self.controls.view != "image":
+            fbw, fbh = glfw.get_framebuffer_size(self.window)
+            if self.debug_res != (fbw, fbh) or self.debug_dirty:
+                self._debug_frame(time.perf_counter(), fbw, fbh, force_full=True)
+            try:
+                path = save_rgb8(self.debug_pic)
+            except OSError as e:
+                self._say(f"screenshot not saved: {e.strerror or e}", error=True)
+                return
+            print(os.path.abspath(path), flush=True)
+            self._say(f"saved {path.name}")
+            return
         self.prog.finish_pass()
         try:
             path = save_linear(self.prog.image())
@@ -647,6 +849,12 @@ class Viewer:
             self.panel.open_all = True  # every widget of the panel drawn
         if n % 60 == 30:
             self.show_help = not self.show_help
+        if n == 60 and self.panel is not None:  # "max error": measured in steps, then applied
+            self.panel.max_error_on = True
+            self._quality_update()
+        if n % 170 == 85:  # the debug views too (their textures must not pile up)
+            c.key("v")
+            self._view_changed()
         if n % 250 == 125:
             w, h = self.args.size
             k = (n // 250) % 3
@@ -664,6 +872,13 @@ class Viewer:
             except Exception:
                 pass
             self._imgui_ready = False
+        if self.quality_job is not None:
+            try:
+                self.quality_job.close()
+            except Exception:
+                pass
+            self.quality_job = None
+        self._release_debug()
         for obj in (self.prog, self.renderer):
             if obj is not None:
                 try:
@@ -684,8 +899,59 @@ class Viewer:
 
 
 def help_text() -> str:
-    width = max(len(k) for k, _ in HELP)
-    return "\n".join(f"  {k:<{width}}  {v.replace('`', '')}" for k, v in HELP)
+    width = max(len(k) for k, _ in HELP_ALL)
+    return "\n".join(f"  {k:<{width}}  {v.replace('`', '')}" for k, v in HELP_ALL)
+
+
+class _releasing_attachments:
+    """While active, framebuffers made with ``ctx.simple_framebuffer`` get
+    their renderbuffers released afterwards: ``Framebuffer.release`` leaves
+    them, and the renderer's debug passes make one per call (a leak of two
+    renderbuffers per debug picture in a long viewer session)."""
+
+    def __init__(self, ctx):
+        self.ctx = ctx
+        self.made: list = []
+
+    def __enter__(self):
+        orig = type(self.ctx).simple_framebuffer.__get__(self.ctx)
+
+        def simple(*a, **k):
+            fbo = orig(*a, **k)
+            self.made.extend((*fbo.color_attachments, fbo.depth_attachment))
+            return fbo
+
+        self.ctx.simple_framebuffer = simple
+        return self
+
+    def __exit__(self, *exc):
+        del self.ctx.simple_framebuffer
+        for att in self.made:
+            if att is not None:
+                att.release()
+        self.made.clear()
+        return False
+
+
+def window_picture(view: str, raw: np.ndarray, width: int, height: int) -> np.ndarray:
+    """The window's picture of a debug view: uint8 (height, width, 3).  ``raw``
+    (viewer.views.raw_view, possibly smaller: scaled up to the window,
+    nearest pixel) coloured as ``glassray render --view`` does
+    (viewer.views.picture); a legend strip (depth, cost) replaces the
+    picture's bottom rows, so that the view keeps the image's framing."""
+    from .views import picture
+
+    h, w = raw.shape[:2]
+    if (w, h) != (width, height):
+        ys = np.arange(height) * h // height
+        xs = np.arange(width) * w // width
+        raw = raw[ys][:, xs]
+    pic = picture(view, raw)
+    if pic.shape[0] > height:
+        legend = pic[height:]
+        pic = (np.concatenate([pic[:height - legend.shape[0]], legend]) if height >= 2 * legend.shape[0]
+               else pic[:height])
+    return np.round(255 * pic).astype(np.uint8)
 
 
 _GL_IS = (("buffers", "glIsBuffer"), ("textures", "glIsTexture"), ("framebuffers", "glIsFramebuffer"),

@@ -54,6 +54,20 @@ HELP = [
 ]
 
 
+#: What the window shows: the image, or a debug view of viewer/views.py
+#: (the rays traced per pixel, the first hit's normal, distance or object).
+VIEWS = ("image", "cost", "normals", "depth", "objects")
+
+#: Viewer keys beyond the spec's table (shown by H / F1 below it).
+EXTRA_HELP = [
+    ("V (shift+V: back)", "cycle the view: image, cost (rays traced per pixel, with a legend), normals, "
+                          "depth, objects (the first hit's normal, distance, object); the HUD names it"),
+]
+
+#: Everything the help overlay lists.
+HELP_ALL = HELP + EXTRA_HELP
+
+
 def first_point_light(scene: Scene) -> int | None:
     for i, lt in enumerate(scene.lights):
         if lt.type == "point" and lt.position is not None:
@@ -75,6 +89,7 @@ class Controls:
         self._last: tuple[float, float] | None = None
         self.changed = True
         self.message = ""  # a short note for the HUD (for example "no point light to move")
+        self.view = VIEWS[0]  # what the window shows (V cycles)
         self.rebase(scene)
 
     # ------------------------------------------------------------ state
@@ -181,7 +196,7 @@ class Controls:
         """Handle a key press (``repeat``: the key is held).  Returns the
         name of an action the window must carry out (``"screenshot"``,
         ``"screenshot_window"``, ``"toggle_panel"``, ``"reload"``, ``"help"``,
-        ``"quit"``) or None."""
+        ``"quit"``, ``"view"`` after V changed :attr:`view`) or None."""
         name = name.lower()
         if name in LIGHT_KEYS:
             axis, sign = LIGHT_KEYS[name]
@@ -195,7 +210,21 @@ class Controls:
         if len(name) == 1 and name in "123456789":
             self.set_max_depth(int(name))
             return None
+        if name == "v":
+            self.cycle_view(-1 if shift else 1)
+            return "view"
         return ACTIONS.get(name)
+
+    def cycle_view(self, step: int = 1) -> str:
+        """V: the next view (shift+V: the previous one), wrapping around."""
+        i = VIEWS.index(self.view) if self.view in VIEWS else 0
+        self.view = VIEWS[(i + step) % len(VIEWS)]
+        return self.view
+
+    def set_view(self, name: str) -> None:
+        if name not in VIEWS:
+            raise ValueError(f"unknown view {name!r} (expected one of {', '.join(VIEWS)})")
+        self.view = name
 
     def move_light(self, axis: int, steps: float) -> bool:
         i = first_point_light(self.scene)

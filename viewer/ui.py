@@ -17,7 +17,7 @@ from pathlib import Path
 
 from imgui_bundle import imgui
 
-from .controls import HELP, first_point_light
+from .controls import HELP_ALL as HELP, VIEWS, first_point_light
 from .scene import Light, Scene, save_scene
 
 _CLAMP = imgui.SliderFlags_.always_clamp
@@ -48,6 +48,9 @@ class PanelResult:
     changed: bool = False  # the picture changes (renderer must get the scene)
     camera_changed: bool = False  # the camera was edited (the orbit camera must follow)
     target_ms_changed: bool = False
+    view_changed: bool = False  # the view combo picked another view (Panel.view)
+    quality_changed: bool = False  # "max error" switched or its value changed
+    remeasure: bool = False  # "measure again" pressed
 
 
 class Panel:
@@ -59,6 +62,10 @@ class Panel:
         self.error = ""  # last reload / shader error
         self.target_ms = float(target_ms)
         self.open_all = False  # open every section and node (tests, soak)
+        self.view = VIEWS[0]  # what the window shows (the app keeps it in step with V)
+        self.max_error_on = False  # "max error": render settings picked by viewer.quality
+        self.max_error = 0.02
+        self.quality_status = ""  # "measuring ...", the pick, set by the app
 
     def _open(self) -> None:
         if self.open_all:
@@ -119,8 +126,29 @@ class Panel:
 
         self._open()
 
+        c, idx = imgui.combo("view (V)", VIEWS.index(self.view) if self.view in VIEWS else 0, list(VIEWS))
+        lo, hi = imgui.get_item_rect_min(), imgui.get_item_rect_max()
+        self.view_rect = (lo.x, lo.y, hi.x, hi.y)  # where the combo is (tests click it)
+        if c and VIEWS[idx] != self.view:
+            self.view, res.view_changed = VIEWS[idx], True
+
         if imgui.collapsing_header("Render", imgui.TreeNodeFlags_.default_open):
             r = scene.render
+            c, on = imgui.checkbox("max error", self.max_error_on)
+            if c:
+                self.max_error_on, res.quality_changed = bool(on), True
+            imgui.same_line()
+            imgui.begin_disabled(not self.max_error_on)
+            c, v = _float("##maxerror", self.max_error, 0.0005, 1e-4, 1.0, "RMSE %.4f", imgui.SliderFlags_.logarithmic)
+            if c:
+                self.max_error, res.quality_changed = v, True
+            if self.max_error_on:
+                if self.quality_status:
+                    imgui.text_wrapped(_plain(self.quality_status))
+                if imgui.small_button("measure again"):
+                    res.remeasure = True
+            imgui.end_disabled()
+            imgui.begin_disabled(self.max_error_on)  # the pick sets these
             c, v = imgui.slider_int("max depth", r.max_depth, 1, 64, "%d", _CLAMP)
             if c and v != r.max_depth:
                 r.max_depth, res.changed = int(v), True
@@ -130,6 +158,7 @@ class Panel:
             c, v = _float("min weight", r.min_weight, 0.0005, 0.0, 1.0, "%.4f")
             if c:
                 r.min_weight, res.changed = v, True
+            imgui.end_disabled()
             c, v = _float("exposure", r.exposure, 0.01, 1e-4, 1e4, "%.3f", imgui.SliderFlags_.logarithmic)
             if c:
                 r.exposure, res.changed = v, True

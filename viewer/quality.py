@@ -1,0 +1,647 @@
+"""Quality by error budget: the fastest measured settings whose error stays
+within a given RMSE (``glassray render --max-error E``, the viewer's "max
+error" setting).
+
+For a scene and an image size, a grid of candidate settings (samples per
+pixel :data:`SAMPLES` x (max depth, min weight) pairs :data:`TRACE`, 20 in
+all) is measured once on this machine, on about :data:`MEASURE_PIXELS`
+pixels:
+
+* **error**: RMSE over all measured pixels and channels in linear space
+  against a reference: the metric of ``glassray bench``
+  (:func:`viewer.bench.image_errors`).  The pixels are :data:`GRID` x
+  :data:`GRID` small tiles of the real image, one at a seeded random place in
+  each cell of a grid over it (the shader is given camera vectors that make
+  a small framebuffer show exactly those pixels of the W x H image), so the
+  error is the error at the real size: a scaled-down picture would count
+  edges, where the sampling error lives, many times over.
+* **reference**: the scene's own shader with max depth 16 and min weight
+  1e-4 (the bench's reference trace settings; going deeper changes the
+  default scene by about 4e-4 RMSE) and :data:`REFERENCE_SAMPLES` samples:
+  the mean of two independent stratified patterns of half as many (seeds 1
+  and 2; the candidates use seed 0, as ``glassray render`` does), whose
+  difference estimates the reference's own noise (``noise`` = RMSE(A - B) /
+  2, reported).  Not min weight 0: on the glass of water it is ten times
+  slower (4.6 s against 0.44 s a sample at 160x90 on llvmpipe) for a change
+  far below that noise.  Not the float64 NumPy tracer
+  (``bench.reference_image``): the GPU already agrees with it
+  (tests/test_gpu_vs_reference.py) and it is one to two orders of magnitude
+  slower; what is measured here is convergence in samples, depth and weight.
+  Measured errors include the reference's noise, so a budget below it
+  cannot be resolved.
+* **time**: the whole picture scaled down to the same number of pixels (its
+  cost per pixel is the full image's: the mean rays per pixel agree), a
+  warm-up pass then :data:`MIN_TIMED_PASSES` timed passes of one sample,
+  each finished on the GPU; a candidate's time is the median pass x its
+  samples x (full pixels / measured pixels): an estimate of one W x H frame.
+
+The measurements are cached as JSON (the reference as .npy beside it) in
+``$XDG_CACHE_HOME/glassray/quality`` (default ``~/.cache/glassray/quality``),
+one file per key: the scene's content less the three settings being chosen
+(camera and lights included: what is seen decides the error), the machine
+(GL renderer, CPU model, usable CPUs), the image size, the shader sources
+and the measuring method.  Files are written atomically; an unreadable or
+corrupt one is measured again, with one warning.
+
+Explicit settings fix their value: ``--samples 4 --max-error E`` chooses among
+the candidates with 4 samples (a value off the grid is measured and added to
+the cache).  When no candidate meets E, the most accurate one is used and the
+line says so (exit 0: a budget is a request, not a contract).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import statistics
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Iterator
+
+import numpy as np
+
+#: Candidate samples per pixel.
+SAMPLES = (1, 2, 4, 8, 16)
+#: Candidate (max depth, min weight) pairs, cheapest first.
+TRACE = ((2, 0.01), (4, 0.003), (6, 0.001), (10, 0.0001))
+#: Pixels measured: a GRID x GRID mosaic of tiles of the real image, about
+#: this many pixels in all (a smaller image is measured whole).
+MEASURE_PIXELS = 160 * 90
+GRID = 8
+#: Reference: samples (seed and trace settings are the bench's).
+REFERENCE_SAMPLES = 32
+#: Timed passes per (max depth, min weight) at least.
+MIN_TIMED_PASSES = 5
+#: Bumped when the measuring method changes (old cache files are then ignored).
+METHOD_VERSION = 1
+#: Seed of the candidates' sample pattern (glassray render's default).
+RENDER_SEED = 0
+
+_WARNED: set[str] = set()
+
+
+def _warn_once(key: str, text: str) -> None:
+    if key not in _WARNED:
+        _WARNED.add(key)
+        print(f"glassray: {text}", file=sys.stderr, flush=True)
+
+
+# ---------------------------------------------------------------- candidates and the pick
+
+
+@dataclass(frozen=True)
+class Candidate:
+    samples: int
+    max_depth: int
+    min_weight: float
+
+    def key(self) -> str:
+        return f"s{self.samples}-d{self.max_depth}-w{self.min_weight:g}"
+
+    def describe(self) -> str:
+        return f"samples {self.samples}, max depth {self.max_depth}, min weight {self.min_weight:g}"
+
+
+@dataclass(frozen=True)
+class Measured:
+    candidate: Candidate
+    time_ms: float  # at the measuring size
+    rmse: float
+    frac_off: float = 0.0  # fraction of pixels more than 1/255 off (display space)
+
+
+def candidate_grid(samples: int | None = None, max_depth: int | None = None,
+                   min_weight: float | None = None) -> list[Candidate]:
+    """The candidates; a given value replaces that axis of the grid."""
+    ss = (samples,) if samples is not None else SAMPLES
+    out: list[Candidate] = []
+    for d, w in TRACE:
+        c_d = max_depth if max_depth is not None else d
+        c_w = min_weight if min_weight is not None else w
+        for s in ss:
+            c = Candidate(int(s), int(c_d), float(c_w))
+            if c not in out:
+                out.append(c)
+    return out
+
+
+def pick(measured: list[Measured], max_error: float) -> tuple[Measured, bool]:
+    """The fastest measurement with rmse <= max_error (ties: the smaller
+    error) and True; when none meets it, the most accurate one (ties: the
+    faster) and False.  A larger budget never gives a slower pick."""
+    if not measured:
+        raise ValueError("no measured candidates")
+    ok = [m for m in measured if m.rmse <= max_error]
+    if ok:
+        return min(ok, key=lambda m: (m.time_ms, m.rmse, m.candidate.key())), True
+    return min(measured, key=lambda m: (m.rmse, m.time_ms, m.candidate.key())), False
+
+
+@dataclass(frozen=True)
+class Layout:
+    """Which pixels are measured.  Error: ``tiles`` (x, y, w, h) of the full
+    image (x right, y down from the top row), packed in a mosaic of ``size``
+    (tile k at ``packed[k]``, x, y from the top).  Time: the whole picture
+    scaled down to ``timing_size``."""
+    full: tuple[int, int]
+    size: tuple[int, int]
+    tiles: tuple[tuple[int, int, int, int], ...]
+    packed: tuple[tuple[int, int], ...]
+    timing_size: tuple[int, int]
+
+    @property
+    def pixels(self) -> int:
+        return self.size[0] * self.size[1]
+
+
+def layout(width: int, height: int, pixels: int = MEASURE_PIXELS, grid: int = GRID) -> Layout:
+    """The measured pixels of a width x height image: all of them when there
+    are at most about ``pixels``; else grid x grid tiles, one in each cell of
+    a grid x grid partition of the image at a seeded random place in it
+    (stratified, so that no part of the picture is favoured), about
+    ``pixels`` in all.  The tiles are pixels of the real image (the same
+    footprint and rays), so their error is the error at the real size."""
+    width, height = int(width), int(height)
+    if width * height <= pixels * 1.25:
+        return Layout((width, height), (width, height), ((0, 0, width, height),), ((0, 0),), (width, height))
+    f = math.sqrt(pixels / (width * height))
+    timing = (max(1, round(width * f)), max(1, round(height * f)))
+    tw = max(1, min(width // grid, round(width * f / grid)))
+    th = max(1, min(height // grid, round(height * f / grid)))
+    rng = np.random.default_rng(width * 100003 + height)
+    tiles, packed = [], []
+    for j in range(grid):
+        for i in range(grid):
+            cx0, cx1 = (i * width) // grid, ((i + 1) * width) // grid
+            cy0, cy1 = (j * height) // grid, ((j + 1) * height) // grid
+            x0 = cx0 + int(rng.integers(0, max(1, cx1 - cx0 - tw + 1)))
+            y0 = cy0 + int(rng.integers(0, max(1, cy1 - cy0 - th + 1)))
+            tiles.append((min(x0, width - tw), min(y0, height - th), tw, th))
+            packed.append((i * tw, j * th))
+    return Layout((width, height), (grid * tw, grid * th), tuple(tiles), tuple(packed), timing)
+
+
+# ---------------------------------------------------------------- keys and the cache
+
+
+def error_scene(scene):
+    """The scene with the settings being chosen (samples, max depth, min
+    weight) set to fixed values: what the error depends on besides them."""
+    from .scene import with_overrides
+
+    return with_overrides(scene, samples=1, max_depth=1, min_weight=0.0)
+
+
+def scene_key(scene) -> str:
+    from .bench import _scene_digest
+
+    return _scene_digest(error_scene(scene))
+
+
+def _shader_digest() -> str:
+    from .shaders import shader_root
+
+    h = hashlib.sha256()
+    root = shader_root()
+    for p in sorted(root.rglob("*")):
+        if p.is_file() and p.suffix in (".frag", ".glsl", ".vert"):
+            h.update(str(p.relative_to(root)).encode())
+            h.update(p.read_bytes())
+    return h.hexdigest()[:12]
+
+
+def machine(ctx) -> dict:
+    """What identifies the machine for timings: GL renderer, CPU model, usable CPUs."""
+    from .bench import machine_info
+
+    info = machine_info()
+    return {"gl_renderer": ctx.info.get("GL_RENDERER", ""), "cpu": info.get("cpu", ""),
+            "cpus": info.get("cpus_usable")}
+
+
+def method() -> dict:
+    from .bench import REFERENCE_MAX_DEPTH, REFERENCE_MIN_WEIGHT, REFERENCE_SEED
+
+    return {"version": METHOD_VERSION, "reference_samples": REFERENCE_SAMPLES, "reference_seed": REFERENCE_SEED,
+            "reference_max_depth": REFERENCE_MAX_DEPTH, "reference_min_weight": REFERENCE_MIN_WEIGHT,
+            "render_seed": RENDER_SEED, "min_timed_passes": MIN_TIMED_PASSES, "shaders": _shader_digest()}
+
+
+def cache_dir() -> Path:
+    base = os.environ.get("XDG_CACHE_HOME") or ""
+    root = Path(base) if base and Path(base).is_absolute() else Path.home() / ".cache"
+    return root / "glassray" / "quality"
+
+
+@dataclass
+class Key:
+    scene: str
+    machine: dict
+    layout: Layout
+    method: dict
+    name: str = "scene"
+
+    def as_dict(self) -> dict:
+        lay = self.layout
+        return {"scene": self.scene, "machine": self.machine, "size": list(lay.full),
+                "tiles": [list(t) for t in lay.tiles], "timing_size": list(lay.timing_size), "method": self.method}
+
+    def stem(self) -> str:
+        h = hashlib.sha256(json.dumps(self.as_dict(), sort_keys=True).encode()).hexdigest()[:16]
+        slug = "".join(c if c.isalnum() or c in "-_" else "-" for c in self.name.lower())[:32].strip("-")
+        W, H = self.layout.full
+        return f"{slug or 'scene'}-{W}x{H}-{h}"
+
+
+def make_key(ctx, scene, lay: Layout) -> Key:
+    return Key(scene_key(scene), machine(ctx), lay, method(), scene.name)
+
+
+class Cache:
+    """One JSON file (and the reference .npy) per key."""
+
+    def __init__(self, key: Key, root: Path | None = None):
+        self.key = key
+        self.root = cache_dir() if root is None else Path(root)
+        self.path = self.root / f"{key.stem()}.json"
+        self.ref_path = self.root / f"{key.stem()}.ref.npy"
+
+    def load(self) -> dict[str, Measured]:
+        """The measurements stored for this key ({} when there are none, or
+        when the file is unreadable: then warn once)."""
+        try:
+            text = self.path.read_text(encoding="utf-8")
+        except FileNotFoundError:
+            return {}
+        except OSError as e:
+            _warn_once(str(self.path), f"quality cache {self.path} is unreadable ({e.strerror or e}); "
+                                       "measuring again")
+            return {}
+        try:
+            doc = json.loads(text)
+            if doc.get("key") != json.loads(json.dumps(self.key.as_dict())):
+                raise ValueError("stored for another key")
+            out = {}
+            for k, m in doc["measured"].items():
+                c = Candidate(int(m["samples"]), int(m["max_depth"]), float(m["min_weight"]))
+                meas = Measured(c, float(m["time_ms"]), float(m["rmse"]), float(m.get("frac_off", 0.0)))
+                if c.key() != k or not all(math.isfinite(v) and v >= 0 for v in (meas.time_ms, meas.rmse)):
+                    raise ValueError(f"bad entry {k!r}")
+                out[k] = meas
+            self.noise = float(doc.get("reference", {}).get("noise_rmse", float("nan")))
+            return out
+        except (ValueError, KeyError, TypeError, AttributeError) as e:
+            _warn_once(str(self.path), f"quality cache {self.path} is corrupt ({type(e).__name__}: {e}); "
+                                       "measuring again")
+            return {}
+
+    def load_reference(self) -> np.ndarray | None:
+        try:
+            ref = np.load(self.ref_path)
+        except (OSError, ValueError):
+            return None
+        w, h = self.key.layout.size
+        if ref.shape != (h, w, 3) or not np.all(np.isfinite(ref)):
+            return None
+        return ref.astype(np.float64)
+
+    def save(self, measured: dict[str, Measured], noise: float, reference: np.ndarray | None = None) -> bool:
+        import datetime as _dt
+        import io
+
+        from .scene import write_atomic
+
+        doc = {"format": 1, "scene_name": self.key.name, "key": self.key.as_dict(),
+               "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+               "reference": {"noise_rmse": noise},
+               "measured": {k: {"samples": m.candidate.samples, "max_depth": m.candidate.max_depth,
+                                "min_weight": m.candidate.min_weight, "time_ms": m.time_ms,
+                                "rmse": m.rmse, "frac_off": m.frac_off}
+                            for k, m in sorted(measured.items())}}
+        try:
+            self.root.mkdir(parents=True, exist_ok=True)
+            if reference is not None:
+                buf = io.BytesIO()
+                np.save(buf, reference.astype(np.float32))
+                write_atomic(self.ref_path, buf.getvalue())
+            write_atomic(self.path, (json.dumps(doc, indent=1) + "\n").encode("utf-8"))
+        except OSError as e:
+            _warn_once("save:" + str(self.root), f"quality cache not saved in {self.root}: {e.strerror or e}")
+            return False
+        return True
+
+
+# ---------------------------------------------------------------- measuring
+
+
+def _window_renderer_class():
+    from .gpu_scene import camera_uniforms
+    from .renderer import Renderer
+
+    class WindowRenderer(Renderer):
+        """A Renderer whose framebuffer shows a window of a larger image:
+        framebuffer pixel (i, j) (from the top left) traces the ray of pixel
+        (i + dx, j + dy) of a ``full`` = (W, H) image.  The camera vectors are
+        changed so that the shader's own formula gives exactly that ray."""
+        full: tuple[int, int] | None = None
+        shift: tuple[int, int] = (0, 0)
+
+        def bind(self, prog, width, height, offset):
+            super().bind(prog, width, height, offset)
+            if self.full is None:
+                return
+            W, H = self.full
+            dx, dy = self.shift
+            cam = camera_uniforms(self.scene, W, H)
+            F, R, U = (np.array(cam[k], dtype=np.float64) for k in ("camForward", "camRight", "camUp"))
+            values = {"camForward": F + R * ((width + 2 * dx) / W - 1) + U * (1 - (height + 2 * dy) / H),
+                      "camRight": R * (width / W), "camUp": U * (height / H)}
+            for name, v in values.items():
+                if name in prog:
+                    prog[name].value = tuple(float(x) for x in v)
+
+    return WindowRenderer
+
+
+class Measurement:
+    """Renders the reference (unless given) and the candidates not measured
+    yet on the pixels of ``layout``, one GPU pass per step, so that a window
+    can keep handling input between steps (:meth:`step`).  Needs the GL
+    context current; leaves blending off and the scissor unset after every
+    step."""
+
+    def __init__(self, ctx, scene, lay: Layout, candidates: list[Candidate],
+                 known: dict[str, Measured] | None = None, reference: np.ndarray | None = None,
+                 noise: float = float("nan")):
+        self.ctx = ctx
+        self.scene = scene
+        self.layout = lay
+        self.candidates = list(candidates)
+        self.measured: dict[str, Measured] = dict(known or {})
+        self.reference = reference
+        self.noise = noise
+        self.todo = [c for c in self.candidates if c.key() not in self.measured]
+        by_trace: dict[tuple, list[int]] = {}
+        for c in self.todo:
+            by_trace.setdefault((c.max_depth, c.min_weight), []).append(c.samples)
+        self._by_trace = by_trace
+        self.total = ((REFERENCE_SAMPLES + 1 if reference is None else 0)
+                      + sum(2 + MIN_TIMED_PASSES + sum(ss) for ss in by_trace.values()))
+        self.steps_done = 0
+        self.done = not self.todo
+        self.rendered_reference = False
+        self._renderer = None
+        self._fbo = self._timing_fbo = None
+        self._gen: Iterator[None] | None = None if self.done else self._run()
+
+    @property
+    def fraction(self) -> float:
+        return 1.0 if self.done else min(1.0, self.steps_done / max(1, self.total))
+
+    def step(self, budget_s: float = 0.0) -> bool:
+        """Run passes until ``budget_s`` is spent (at least one); True when done."""
+        if self.done:
+            return True
+        import moderngl
+
+        t0 = time.perf_counter()
+        try:
+            while True:
+                try:
+                    next(self._gen)
+                except StopIteration:
+                    self.done = True
+                    self._release()
+                    return True
+                self.steps_done += 1
+                if time.perf_counter() - t0 >= budget_s:
+                    return False
+        except BaseException:
+            self.close()
+            raise
+        finally:
+            self.ctx.disable(moderngl.BLEND)
+            self.ctx.scissor = None
+
+    def run(self, progress: Callable[[int, int], None] | None = None) -> None:
+        while not self.step(0.0):
+            if progress is not None:
+                progress(self.steps_done, self.total)
+        if progress is not None:
+            progress(self.total, self.total)
+
+    def close(self) -> None:
+        """Stop early (the window no longer needs it) and free the GL objects."""
+        if self._gen is not None:
+            self._gen.close()
+            self._gen = None
+        self._release()
+        self.done = True
+
+    def _release(self) -> None:
+        if self._renderer is not None:
+            self._renderer.release()
+            self._renderer = None
+        for fbo in (self._fbo, self._timing_fbo):
+            if fbo is not None:
+                for att in (*(fbo.color_attachments or ()), fbo.depth_attachment):
+                    if att is not None:
+                        att.release()  # Framebuffer.release leaves them
+                fbo.release()
+        self._fbo = self._timing_fbo = None
+
+    # --------------------------------------------------------- the work
+
+    def _pass(self, offset) -> None:
+        """One sample of every tile, added into the mosaic."""
+        lay, r = self.layout, self._renderer
+        W, H = lay.size
+        for (x0, y0, tw, th), (px, py) in zip(lay.tiles, lay.packed):
+            r.full = lay.full
+            r.shift = (x0 - px, y0 - py)
+            r.draw_sample(W, H, offset, (px, H - py - th, tw, th))
+
+    def _accumulate(self, offsets) -> Iterator[None]:
+        import moderngl
+
+        ctx = self.ctx
+        for off in offsets:
+            self._fbo.use()
+            ctx.enable(moderngl.BLEND)
+            ctx.blend_func = moderngl.ONE, moderngl.ONE
+            ctx.blend_equation = moderngl.FUNC_ADD
+            self._pass((float(off[0]), float(off[1])))
+            ctx.finish()
+            ctx.disable(moderngl.BLEND)
+            yield
+
+    def _read(self, n: int) -> np.ndarray:
+        w, h = self.layout.size
+        raw = self._fbo.read(components=4, dtype="f4")
+        img = np.frombuffer(raw, dtype=np.float32).reshape(h, w, 4)[::-1, :, :3]
+        return np.asarray(img, dtype=np.float64) / n
+
+    def _clear(self) -> None:
+        self._fbo.use()
+        self._fbo.clear(0.0, 0.0, 0.0, 0.0)
+
+    def _set_scene(self, scene) -> None:
+        if self._renderer is None:
+            self._renderer = _window_renderer_class()(self.ctx, scene)
+        else:
+            self._renderer.set_scene(scene)  # compiles when the depth is new
+
+    def _run(self) -> Iterator[None]:
+        from .bench import REFERENCE_MAX_DEPTH, REFERENCE_MIN_WEIGHT, REFERENCE_SEED, image_errors
+        from .sampling import sample_offsets
+        from .scene import with_overrides
+
+        self._fbo = self.ctx.simple_framebuffer(self.layout.size, components=4, dtype="f4")
+        if self.reference is None:
+            self._set_scene(with_overrides(self.scene, max_depth=REFERENCE_MAX_DEPTH,
+                                           min_weight=REFERENCE_MIN_WEIGHT))
+            yield
+            # two independent stratified patterns of half the samples each (seeds
+            # REFERENCE_SEED and REFERENCE_SEED + 1): their mean is the reference,
+            # their difference estimates its own sampling noise
+            half = REFERENCE_SAMPLES // 2
+            self._clear()
+            yield from self._accumulate(sample_offsets(half, REFERENCE_SEED))
+            a = self._read(half)
+            self._clear()
+            yield from self._accumulate(sample_offsets(half, REFERENCE_SEED + 1))
+            b = self._read(half)
+            self.reference = (a + b) / 2
+            self.noise = float(np.sqrt(np.mean((a - b) ** 2)) / 2)
+            self.rendered_reference = True
+        # time of a whole frame: the scaled-down picture's time scaled to all pixels
+        scale = self.layout.full[0] * self.layout.full[1] / (self.layout.timing_size[0] * self.layout.timing_size[1])
+        tw, th = self.layout.timing_size
+        self._timing_fbo = self.ctx.simple_framebuffer((tw, th), components=4, dtype="f4")
+        for (d, wgt), sample_counts in self._by_trace.items():
+            self._set_scene(with_overrides(self.scene, max_depth=d, min_weight=wgt))
+            yield
+            timings: list[float] = []
+            yield from self._timed_passes(1 + MIN_TIMED_PASSES, timings)
+            per_pass = statistics.median(timings[1:])  # the first is a warm-up
+            for n in sample_counts:
+                self._clear()
+                yield from self._accumulate(sample_offsets(n, RENDER_SEED))
+                err = image_errors(self._read(n), self.reference)
+                c = Candidate(n, d, wgt)
+                self.measured[c.key()] = Measured(c, n * per_pass * scale, err["rmse"], err["frac_off"])
+
+    def _timed_passes(self, count: int, timings: list[float]) -> Iterator[None]:
+        """Centred samples of the whole picture at the timing size, each
+        finished on the GPU and timed."""
+        ctx, r = self.ctx, self._renderer
+        tw, th = self.layout.timing_size
+        r.full = None
+        for _ in range(count):
+            ctx.finish()
+            t0 = time.perf_counter()
+            self._timing_fbo.use()
+            r.draw_sample(tw, th, (0.5, 0.5))
+            ctx.finish()
+            timings.append((time.perf_counter() - t0) * 1000.0)
+            yield
+
+
+# ---------------------------------------------------------------- choosing
+
+
+@dataclass
+class Choice:
+    measured: Measured
+    met: bool
+    max_error: float
+    cache_hit: bool
+    layout: Layout
+    noise: float  # the reference's own sampling noise (RMSE, estimated)
+    cache_path: Path | None = None
+    candidates: int = 0
+
+    def line(self) -> str:
+        m = self.measured
+        W, H = self.layout.full
+        t = f"{m.time_ms / 1000:.2f} s" if m.time_ms >= 1000 else f"{m.time_ms:.1f} ms"
+        what = (f"picked {m.candidate.describe()}" if self.met else
+                f"no measured setting reaches it; using the most accurate: {m.candidate.describe()}")
+        return (f"max-error {self.max_error:g}: {what} (measured RMSE {m.rmse:.3g}, {t} per {W}x{H} frame; "
+                f"{self.candidates} candidates measured on {self.layout.pixels} of its pixels, reference "
+                f"noise {self.noise:.2g}; cache {'hit' if self.cache_hit else 'miss'})")
+
+
+def prepare(ctx, scene, width: int, height: int, samples: int | None = None, max_depth: int | None = None,
+            min_weight: float | None = None, root: Path | None = None,
+            pixels: int = MEASURE_PIXELS) -> tuple[Measurement, Cache, list[Candidate]]:
+    """The measurement still needed for this scene at this image size
+    (done at once on a cache hit)."""
+    lay = layout(width, height, pixels)
+    cache = Cache(make_key(ctx, scene, lay), root)
+    cands = candidate_grid(samples, max_depth, min_weight)
+    known = cache.load()
+    noise = getattr(cache, "noise", float("nan"))
+    ref = None
+    if any(c.key() not in known for c in cands):
+        ref = cache.load_reference() if known else None
+        if ref is None:
+            known = {}  # a new reference: the old errors were measured against another one
+    return Measurement(ctx, scene, lay, cands, known, ref, noise), cache, cands
+
+
+def finish(meas: Measurement, cache: Cache, cands: list[Candidate], max_error: float) -> Choice:
+    """Save what was measured and pick."""
+    hit = not meas.todo
+    if not hit:
+        cache.save(meas.measured, meas.noise, meas.reference)
+    pool = [meas.measured[c.key()] for c in cands]
+    m, met = pick(pool, max_error)
+    return Choice(m, met, max_error, hit, meas.layout, meas.noise, cache.path, len(pool))
+
+
+def choose(ctx, scene, width: int, height: int, max_error: float, samples: int | None = None,
+           max_depth: int | None = None, min_weight: float | None = None, root: Path | None = None,
+           progress: Callable[[int, int], None] | None = None, pixels: int = MEASURE_PIXELS) -> Choice:
+    """Measure (or read from the cache) and pick, blocking."""
+    meas, cache, cands = prepare(ctx, scene, width, height, samples, max_depth, min_weight, root, pixels)
+    meas.run(progress)
+    return finish(meas, cache, cands, max_error)
+
+
+def apply(scene, choice: Choice):
+    """A copy of the scene with the picked settings."""
+    from .scene import with_overrides
+
+    c = choice.measured.candidate
+    return with_overrides(scene, samples=c.samples, max_depth=c.max_depth, min_weight=c.min_weight)
+
+
+def parse_max_error(text: str) -> float:
+    """argparse type of --max-error: a finite number > 0."""
+    import argparse
+
+    try:
+        v = float(text)
+    except ValueError:
+        v = float("nan")
+    if not (math.isfinite(v) and v > 0):
+        raise argparse.ArgumentTypeError(f"expected a number > 0 (an RMSE in linear units, such as 0.01), "
+                                         f"got {text!r}")
+    return v
+
+
+def scene_for_max_error(ctx, scene, args, width: int, height: int,
+                        progress: Callable[[int, int], None] | None = None):
+    """``glassray render --max-error E``: the scene with the picked settings;
+    prints one line on stderr.  Explicit --samples / --max-depth /
+    --min-weight fix those values."""
+    choice = choose(ctx, scene, width, height, args.max_error, samples=getattr(args, "samples", None),
+                    max_depth=getattr(args, "max_depth", None), min_weight=getattr(args, "min_weight", None),
+                    progress=progress)
+    print(f"glassray: {choice.line()}", file=sys.stderr, flush=True)
+    return apply(scene, choice)
