@@ -20,6 +20,16 @@ uniform vec3 camUp;            // up * tan(fov/2)
 
 out vec4 fragColor;
 
+#ifdef ADAPTIVE
+// Adaptive sampling (viewer/adaptive.py): only pixels whose activeMask texel
+// is set trace this sample.  Every traced sample adds (L, 1) to attachment 0
+// and (sampleParity * L, L.L) to attachment 1: the renderer gets each
+// pixel's mean, the mean of its odd-index samples (a pixel's samples are
+// always 0..n-1, so their count is n / 2) and a spread.
+uniform sampler2D activeMask;
+uniform float sampleParity;
+layout(location = 1) out vec4 fragMoments;
+#endif
 
 #if defined(VIEW_MODE) && VIEW_MODE == 3
 int rayCount = 0;           // the cost view: rays traced for this pixel sample
@@ -419,7 +429,15 @@ void main() {
 #elif defined(VIEW_MODE)
     fragColor = firstHit(vec3(0.0), dir);
 #else
+#ifdef ADAPTIVE
+    // Discard before tracing: llvmpipe then skips 4x4 blocks with no active
+    // pixel, a GPU its inactive warps' work.
+    if (texelFetch(activeMask, ivec2(gl_FragCoord.xy), 0).r < 0.5) discard;
+#endif
     vec3 L = radiance(vec3(0.0), dir) * params.w;
     fragColor = vec4(L, 1.0);
+#ifdef ADAPTIVE
+    fragMoments = vec4(sampleParity * L, dot(L, L));
+#endif
 #endif
 }

@@ -85,6 +85,12 @@ def _float_range(lo: float, hi: float, lo_open: bool = False):
     return parse
 
 
+def _max_error(text: str) -> float:
+    from .quality import parse_max_error
+
+    return parse_max_error(text)
+
+
 # ---------------------------------------------------------------- parser
 
 
@@ -137,9 +143,21 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--timing", action="store_true",
                    help="after a warm-up, render --repeat more times and print the median ms per frame")
     r.add_argument("--repeat", type=_int_range(1, 1000), default=5, metavar="N", help="timed renders (5)")
-    r.add_argument("--view", choices=("color", "normals", "depth", "objects", "cost"), default="color",
+    r.add_argument("--view", choices=("color", "normals", "depth", "objects", "cost", "samples"), default="color",
                    help="what to draw: the image (color), or the first hit's normals, distance or object, "
-                        "or rays traced per pixel (cost); PNG gets a legend, .npy/.pfm the raw values")
+                        "or rays traced per pixel (cost), or samples per pixel of the adaptive render "
+                        "(samples); PNG gets a legend, .npy/.pfm the raw values")
+    r.add_argument("--adaptive", action=argparse.BooleanOptionalAction, default=None,
+                   help="adaptive anti-aliasing: --samples is the mean per pixel, spent where a pixel's "
+                        f"estimated error is above --target-error ({'on' if ADAPTIVE_DEFAULT else 'off'} by "
+                        "default; on when --target-error is given)")
+    r.add_argument("--target-error", type=_float_range(0.0, 1e9, lo_open=True), metavar="E",
+                   help="adaptive sampling's per-pixel error target, linear radiance on the largest channel "
+                        "(default 0.005)")
+    r.add_argument("--max-error", type=_max_error, metavar="E",
+                   help="use the fastest settings (samples, max depth, min weight) whose measured RMSE "
+                        "(linear) against a converged reference is at most E; measured once per scene, size "
+                        "and machine and cached; --samples/--max-depth/--min-weight fix their value")
     _add_overrides(r)
     _add_common(r)
 
@@ -223,6 +241,18 @@ def _progress_bar(label: str):
     return show
 
 
+# Adaptive anti-aliasing is off unless asked for: --samples N then keeps the
+# spec's meaning (N samples in every pixel); README "Adaptive anti-aliasing"
+# has the measurements.
+ADAPTIVE_DEFAULT = False
+
+
+def _adaptive(args) -> bool:
+    if args.adaptive is not None:
+        return args.adaptive
+    return ADAPTIVE_DEFAULT or args.target_error is not None or args.view == "samples"
+
+
 def cmd_render(args) -> int:
     from .imageio import OUTPUT_EXTENSIONS, write_image
 
@@ -245,17 +275,45 @@ def cmd_render(args) -> int:
     except ContextError as e:
         raise Failure(str(e)) from e
     w, h = args.size
+    if getattr(args, "max_error", None) is not None:
+        from .quality import scene_for_max_error
+
+        try:
+            scene = scene_for_max_error(ctx, scene, args, w, h, progress=_progress_bar("max-error: measuring"))
+        except BaseException:
+            ctx.release()
+            raise
     samples = scene.render.samples
     renderer = Renderer(ctx, scene)
+    adaptive = _adaptive(args)
+    if args.view == "samples" and not adaptive:
+        raise UsageError("--view samples shows an adaptive render's samples per pixel; drop --no-adaptive")
     try:
+        if adaptive:
+            from .adaptive import DEFAULT_TARGET_ERROR, render_adaptive
+
+            target = args.target_error if args.target_error is not None else DEFAULT_TARGET_ERROR
+
+            def draw(progress=None):
+                return render_adaptive(renderer, w, h, samples, target, args.seed, progress=progress)
+        else:
+            def draw(progress=None):
+                return renderer.render(w, h, samples, args.seed, progress=progress)
+        if args.view == "samples":
+            result = draw(_progress_bar(f"render {w}x{h}"))
+            return _write_view(renderer, args.view, w, h, out, samples_map=result.spp)
         if args.view != "color":
             return _write_view(renderer, args.view, w, h, out)
-        image = renderer.render(w, h, samples, args.seed, progress=_progress_bar(f"render {w}x{h}"))
+        result = draw(_progress_bar(f"render {w}x{h}"))
+        image = result.image if adaptive else result
+        if adaptive:
+            print(f"render: adaptive, {result.mean_spp:.2f} samples per pixel on average "
+                  f"(budget {samples}, target error {target:g})", file=sys.stderr)
         if args.timing:
-            times = renderer.time_render(w, h, samples, args.repeat, args.seed)
+            times = time_frames(draw, args.repeat)
             med = statistics.median(times)
-            print(f"render: {med:.1f} ms per frame (median of {args.repeat}, {w}x{h}, {samples} samples)",
-                  file=sys.stderr)
+            print(f"render: {med:.1f} ms per frame (median of {args.repeat}, {w}x{h}, {samples} samples"
+                  f"{', adaptive' if adaptive else ''})", file=sys.stderr)
     finally:
         renderer.release()
         ctx.release()
@@ -266,12 +324,24 @@ def cmd_render(args) -> int:
     return 0
 
 
-def _write_view(renderer, view: str, w: int, h: int, out: Path) -> int:
+def time_frames(draw, repeat: int) -> list[float]:
+    """Wall-clock ms of `repeat` calls of draw() after one warm-up (the image
+    is read back, so the GPU has finished before each clock stops)."""
+    draw()
+    times = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        draw()
+        times.append((time.perf_counter() - t0) * 1000.0)
+    return times
+
+
+def _write_view(renderer, view: str, w: int, h: int, out: Path, samples_map=None) -> int:
     from .imageio import encode_npy, encode_pfm
     from .scene import write_atomic
     from .views import picture, raw_view
 
-    raw = raw_view(renderer, view, w, h)
+    raw = raw_view(renderer, view, w, h, samples_map)
     try:
         if out.suffix.lower() == ".png":
             from PIL import Image

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-VIEWS = ("normals", "depth", "objects", "cost")
+VIEWS = ("normals", "depth", "objects", "cost", "samples")
 
 # A perceptually ordered heat map (dark blue -> purple -> orange -> yellow),
 # piecewise linear between these stops; display-space sRGB in 0..1.
@@ -24,9 +24,12 @@ def heat(x: np.ndarray) -> np.ndarray:
     return _HEAT[i] * (1 - f) + _HEAT[i + 1] * f
 
 
-def raw_view(renderer, view: str, width: int, height: int) -> np.ndarray:
+def raw_view(renderer, view: str, width: int, height: int, samples_map: np.ndarray | None = None) -> np.ndarray:
     """(H, W, 3) float32 raw values: normals xyz; depth t (inf: no hit);
-    object index (-1: none); rays per pixel."""
+    object index (-1: none); rays per pixel; samples per pixel of an
+    adaptive render (`samples_map`, which the caller renders)."""
+    if view == "samples":
+        return np.repeat(np.asarray(samples_map, np.float32)[..., None], 3, axis=2)
     if view == "cost":
         v = renderer.ray_cost(width, height).astype(np.float32)
         return np.repeat(v[..., None], 3, axis=2)
@@ -53,7 +56,7 @@ def _legend(width: int, lo: float, hi: float, unit: str) -> np.ndarray:
 
 def picture(view: str, raw: np.ndarray) -> np.ndarray:
     """Display-space (H', W, 3) picture in 0..1 of a raw view, with a legend
-    strip below for depth and cost."""
+    strip below for depth, cost and samples."""
     v = raw[..., 0]
     if view == "normals":
         hit = np.any(raw != 0, axis=2, keepdims=True)
@@ -66,11 +69,15 @@ def picture(view: str, raw: np.ndarray) -> np.ndarray:
     lo, hi = (float(v[finite].min()), float(v[finite].max())) if finite.any() else (0.0, 1.0)
     if view == "cost":
         lo = 0.0
-    if view == "depth" and lo > 0:
+    if view == "samples":
+        # from 1 sample to the most any pixel took, on a log scale
+        lo, hi = 1.0, max(hi, 2.0)
+        norm = np.log2(np.maximum(v, 1.0)) / np.log2(hi)
+    elif view == "depth" and lo > 0:
         # distances span orders of magnitude (a floor to the horizon): log scale
         norm = np.log(np.where(finite, v, lo) / lo) / max(np.log(hi / lo), 1e-12)
     else:
         norm = (v - lo) / max(hi - lo, 1e-12)
     img = np.where(finite[..., None], heat(norm), 0.0)
-    unit = "rays" if view == "cost" else "(log)"
+    unit = {"cost": "rays", "samples": "samples (log)"}.get(view, "(log)")
     return np.concatenate([img, _legend(raw.shape[1], round(lo, 3), round(hi, 3), unit)], axis=0)
