@@ -44,6 +44,8 @@ class Renderer:
         self._ubo: moderngl.Buffer | None = None
         self._sky: moderngl.Texture | None = None
         self._sky_path = None
+        self._fbo: moderngl.Framebuffer | None = None
+        self._fbo_tex: moderngl.Texture | None = None
         self.scene: Scene | None = None
         self.program: moderngl.Program | None = None
         self.set_scene(scene)
@@ -130,22 +132,52 @@ class Renderer:
         return [(x, y, min(t, width - x), min(t, height - y))
                 for y in range(0, height, t) for x in range(0, width, t)]
 
+    def _target(self, width: int, height: int) -> moderngl.Framebuffer:
+        """The RGBA32F framebuffer that offscreen renders sum their samples
+        in, kept between renders of the same size (making one costs as much
+        as tracing the sky of a 1280x720 frame on llvmpipe)."""
+        if self._fbo is None or self._fbo.size != (width, height):
+            self._release_target()
+            self._fbo_tex = self.ctx.texture((width, height), 4, dtype="f4")
+            self._fbo = self.ctx.framebuffer(color_attachments=[self._fbo_tex])
+        return self._fbo
+
+    def _release_target(self) -> None:
+        for obj in (self._fbo, self._fbo_tex):
+            if obj is not None:
+                obj.release()
+        self._fbo = self._fbo_tex = None
+
+    def _read_rgb(self, fbo: moderngl.Framebuffer, samples: int = 1) -> np.ndarray:
+        """(H, W, 3) float32 of the framebuffer divided by `samples`, first
+        row = top.  Read as RGB: the driver drops alpha faster than numpy
+        copies a strided view."""
+        width, height = fbo.size
+        raw = np.frombuffer(fbo.read(components=3, dtype="f4"), np.float32).reshape(height, width, 3)
+        if samples == 1:
+            return np.ascontiguousarray(raw[::-1])
+        return np.divide(raw[::-1], np.float32(samples))
+
     def render(self, width: int, height: int, samples: int | None = None, seed: int = 0,
                progress: Callable[[int, int], None] | None = None) -> np.ndarray:
         """(H, W, 3) float32 linear RGB, exposure applied, first row = top."""
         samples = samples or self.scene.render.samples
         offsets = sample_offsets(samples, seed)
         ctx = self.ctx
-        fbo = ctx.simple_framebuffer((width, height), components=4, dtype="f4")
+        fbo = self._target(width, height)
+        fbo.use()
+        ctx.blend_func = moderngl.ONE, moderngl.ONE
+        ctx.blend_equation = moderngl.FUNC_ADD
+        tiles = self.tiles(width, height)
+        total, done = samples * len(tiles), 0
         try:
-            fbo.use()
-            fbo.clear(0.0, 0.0, 0.0, 0.0)
-            ctx.enable(moderngl.BLEND)
-            ctx.blend_func = moderngl.ONE, moderngl.ONE
-            ctx.blend_equation = moderngl.FUNC_ADD
-            tiles = self.tiles(width, height)
-            total, done = samples * len(tiles), 0
-            for off in offsets:
+            for i, off in enumerate(offsets):
+                # The first sample's tiles cover every pixel: written as they
+                # are (no clear needed), the later ones added.
+                if i == 0:
+                    ctx.disable(moderngl.BLEND)
+                elif i == 1:
+                    ctx.enable(moderngl.BLEND)
                 for rect in tiles:
                     self.draw_sample(width, height, off, rect)
                     # Wait for each draw: the queue never holds more than one
@@ -155,12 +187,9 @@ class Renderer:
                     done += 1
                     if progress is not None:
                         progress(done, total)
-            ctx.disable(moderngl.BLEND)
-            raw = fbo.read(components=4, dtype="f4")
         finally:
-            fbo.release()
-        img = np.frombuffer(raw, dtype=np.float32).reshape(height, width, 4)[::-1, :, :3]
-        return np.ascontiguousarray(img / np.float32(samples))
+            ctx.disable(moderngl.BLEND)
+        return self._read_rgb(fbo, samples)
 
     def first_hits(self, width: int, height: int, offset: tuple[float, float] = (0.5, 0.5)):
         """Per pixel, the first geometric surface along the camera ray through
@@ -180,16 +209,14 @@ class Renderer:
         """One sample of a VIEW_MODE variant of the shader, (H, W, 4) top row first."""
         main = self.program
         self.program = self.variant(VIEW_MODE=mode)
-        fbo = self.ctx.simple_framebuffer((width, height), components=4, dtype="f4")
+        fbo = self._target(width, height)
         try:
             fbo.use()
-            fbo.clear(0.0, 0.0, 0.0, 0.0)
             self.ctx.disable(moderngl.BLEND)
-            for rect in self.tiles(width, height):
+            for rect in self.tiles(width, height):   # together they cover every pixel
                 self.draw_sample(width, height, offset, rect)
             raw = fbo.read(components=4, dtype="f4")
         finally:
-            fbo.release()
             self.program = main
         return np.frombuffer(raw, np.float32).reshape(height, width, 4)[::-1]
 
@@ -206,6 +233,7 @@ class Renderer:
         return times
 
     def release(self) -> None:
+        self._release_target()
         for vao in self._vao_for.values():
             vao.release()
         for prog in self._programs.values():
