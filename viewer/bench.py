@@ -222,9 +222,11 @@ def render_size(setting: Setting, width: int, height: int) -> tuple[int, int]:
 
 def _reference_source_digest() -> str:
     try:
-        from . import reference
+        from . import reference, sampling
 
-        return hashlib.sha256(Path(reference.__file__).read_bytes()).hexdigest()[:12]
+        # the tracer and its sample pattern
+        return hashlib.sha256(Path(reference.__file__).read_bytes()
+                              + Path(sampling.__file__).read_bytes()).hexdigest()[:12]
     except Exception:  # not importable: the GPU fallback is keyed by the shader sources instead
         from .shaders import shader_root
 
