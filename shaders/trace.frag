@@ -21,14 +21,37 @@ uniform vec3 camUp;            // up * tan(fov/2)
 out vec4 fragColor;
 
 #ifdef ADAPTIVE
-// Adaptive sampling (viewer/adaptive.py): only pixels whose activeMask texel
-// is set trace this sample.  Every traced sample adds (L, 1) to attachment 0
-// and (sampleParity * L, L.L) to attachment 1: the renderer gets each
-// pixel's mean, the mean of its odd-index samples (a pixel's samples are
-// always 0..n-1, so their count is n / 2) and a spread.
-uniform sampler2D activeMask;
+// Adaptive sampling (viewer/adaptive.py).  Every sample writes (L, 1) to
+// attachment 0 and (sampleParity * L, L.L) to attachment 1, so that the
+// sums give each pixel's mean, the mean of its odd-index samples and a
+// spread.  ADAPTIVE_LIST: fragment (x, y) of a small framebuffer traces the
+// image pixel (i, j) stored at (x, y) of pixelList (i < 0: padding, nothing
+// traced), so only the pixels that still need samples are drawn and every
+// SIMD lane does useful work.  ADAPTIVE_FIRST: the whole image, plus the
+// first interaction of each camera ray in attachments 2 and 3.
 uniform float sampleParity;
 layout(location = 1) out vec4 fragMoments;
+#ifdef ADAPTIVE_LIST
+uniform isampler2D pixelList;
+// A batch of samples per draw (fewer draw calls): samples firstSample ..
+// firstSample + batchSize - 1 at these offsets; parity from their index.
+#define MAX_BATCH 32
+uniform int batchSize;
+uniform int firstSample;
+uniform vec2 batchOffsets[MAX_BATCH];
+#endif
+#ifdef ADAPTIVE_FIRST
+layout(location = 2) out vec4 fragFirstHit;     // (t, object index, 0, 0); (INF, -1) for the sky
+layout(location = 3) out vec4 fragFirstNormal;  // unit outward normal, 0 for the sky
+#endif
+#endif
+#ifdef ADAPTIVE_FIRST
+float firstT = INF;
+int firstObject = -1;
+vec3 firstN = vec3(0.0);
+#define RECORD_FIRST(br, it) if (br.depth == 1) { firstT = length(it.p - br.o); firstObject = it.object; firstN = it.n; }
+#else
+#define RECORD_FIRST(br, it)
 #endif
 
 #if defined(VIEW_MODE) && VIEW_MODE == 3
@@ -340,6 +363,7 @@ void walkNode(Branch br, inout vec3 sum, out Branch reflected, out Branch refrac
     bool hit = nextInteraction(br.o, br.d, mask, atten, it);
     vec3 w = br.w * atten;
     if (!hit) { sum += w * skyRadiance(br.d); return; }
+    RECORD_FIRST(br, it)
     if (maxComponent(w) <= 0.0) return;
     Material m = materials[objects[it.object].info.y];
     vec3 n = dot(it.n, br.d) < 0.0 ? it.n : -it.n;     // facing the ray
@@ -420,6 +444,19 @@ vec4 firstHit(vec3 o, vec3 d) {
 
 void main() {
     // Pixel (i, j): i to the right, j downward from the top row.
+#ifdef ADAPTIVE_LIST
+    ivec2 listed = texelFetch(pixelList, ivec2(gl_FragCoord.xy), 0).xy;
+    fragColor = vec4(0.0);
+    fragMoments = vec4(0.0);
+    if (listed.x < 0) return;
+    for (int b = 0; b < batchSize; ++b) {
+        vec2 uvb = (vec2(listed) + batchOffsets[b]) / imageSize;
+        vec3 dirb = normalize(camForward + (2.0 * uvb.x - 1.0) * camRight + (1.0 - 2.0 * uvb.y) * camUp);
+        vec3 Lb = radiance(vec3(0.0), dirb) * params.w;
+        fragColor += vec4(Lb, 1.0);
+        fragMoments += vec4(float((firstSample + b) & 1) * Lb, dot(Lb, Lb));
+    }
+#else
     vec2 ij = vec2(floor(gl_FragCoord.x), imageSize.y - 1.0 - floor(gl_FragCoord.y));
     vec2 uv = (ij + sampleOffset) / imageSize;
     vec3 dir = normalize(camForward + (2.0 * uv.x - 1.0) * camRight + (1.0 - 2.0 * uv.y) * camUp);
@@ -429,15 +466,15 @@ void main() {
 #elif defined(VIEW_MODE)
     fragColor = firstHit(vec3(0.0), dir);
 #else
-#ifdef ADAPTIVE
-    // Discard before tracing: llvmpipe then skips 4x4 blocks with no active
-    // pixel, a GPU its inactive warps' work.
-    if (texelFetch(activeMask, ivec2(gl_FragCoord.xy), 0).r < 0.5) discard;
-#endif
     vec3 L = radiance(vec3(0.0), dir) * params.w;
     fragColor = vec4(L, 1.0);
 #ifdef ADAPTIVE
     fragMoments = vec4(sampleParity * L, dot(L, L));
 #endif
+#ifdef ADAPTIVE_FIRST
+    fragFirstHit = vec4(firstT, float(firstObject), 0.0, 0.0);
+    fragFirstNormal = vec4(firstN, 0.0);
 #endif
+#endif
+#endif  // ADAPTIVE_LIST
 }

@@ -4,33 +4,35 @@ The error left in a correct Whitted image is almost all pixel footprint
 (silhouettes, checker edges, the checker toward the horizon, the refracted
 picture inside glass); a flat region is exact with one centred sample.  So:
 
-1. Round 0 traces sample 0 (the pixel centre) everywhere.  A pixel needs more
-   when its 3x3 neighbourhood says its footprint may not be flat: a
-   neighbour's colour differs by more than the target error, the first hit
+1. The first pass traces sample 0 (the pixel centre) of every pixel and
+   records the first interaction of each camera ray.  A pixel is flagged
+   when its 3x3 neighbourhood says its footprint may not be flat: a colour
+   differs by more than max(target, FLAG_CONTRAST), the first interaction
    changes across it (another object, a normal turned by more than
-   NORMAL_ANGLE_DEG, a relative depth jump over DEPTH_JUMP), or neighbouring
-   rays land on a checker more than half a check apart (where centre
-   samples alias into flat-looking patches).  Everything else ends with one
-   sample.
-2. Later rounds take the pixels still active to 4, 16, 64, ... samples.  A
+   NORMAL_ANGLE_DEG, a relative depth jump over DEPTH_JUMP), or the camera
+   rays of neighbours land on a checker more than half a check apart (where
+   centre samples alias into flat-looking patches); the flags are dilated by
+   one pixel (a thin feature between two centres).  Every other pixel ends
+   with one sample.
+2. Flagged pixels get FIRST_ROUND samples.  Then, round after round, a
    pixel's error is estimated from its own samples (the difference of its
-   even- and odd-index halves, and its standard error) and, for a pixel
-   whose samples agree, from the sliver of an edge they may all have missed
-   (half its round-0 contrast over n).  It stops for good once that is at
-   most the target error.
+   even- and odd-index halves, and its standard error), from what they may
+   have missed (SLIVER x its contrast / n) and from its neighbours (errors
+   lie along edges: at least NEIGHBOUR_SHARE of the worst neighbour's); the
+   pixels above the target error whose error^2 / n is largest (the squared
+   error a doubling removes per sample) double their samples, as many as
+   ROUND_SHARE of the budget left pays for.
 3. The budget is samples x W x H pixel-samples in all (the mean samples per
-   pixel), one pixel taking at most MAX_SPP_FACTOR x samples.  When a round
-   cannot pay for every active pixel, those with the largest estimated
-   error go first.
+   pixel), one pixel taking at most MAX_SPP_FACTOR x samples; the render
+   stops when it is spent or no pixel is above the target.
 
-Each sample is drawn over the bounding boxes of the active pixels (one per
-renderer tile that holds any), and the shader discards inactive pixels
-before tracing (llvmpipe skips a 4x4 block whose pixels all discard).
-Samples follow sampling.progressive_offsets (Sobol'), so every prefix is
-evenly spread.  Everything is deterministic for a seed.
-
-The target error is per pixel, in linear radiance units (the .npy values),
-on the largest colour channel.
+The GPU traces only listed pixels: a small framebuffer whose fragment
+(x, y) traces the image pixel stored at (x, y) of a list texture, in
+coherent order (8x8 image tiles), up to MAX_BATCH samples per fragment and
+draw.  Samples follow sampling.progressive_offsets, so every prefix is
+evenly spread; everything is deterministic for a seed.  The target error
+is per pixel, in linear radiance units (the .npy values), on the largest
+colour channel.
 """
 
 from __future__ import annotations
@@ -53,12 +55,21 @@ DEPTH_JUMP = 0.1
 # are where the Sobol' points fill a square grid of strata (2x2, 4x4, 8x8),
 # which suits edges of any direction; measured better than doubling.
 FIRST_ROUND = 4
-ROUND_FACTOR = 4
+ROUND_FACTOR = 2
 # One pixel takes at most this many times the mean budget, and never more
 # than MAX_SPP: an edge pixel may need far more than the average.
 MAX_SPP_FACTOR = 8
 MAX_SPP = 1024
-SLIVER = 0.5
+SLIVER = 0.1
+#: A pixel is flagged for more samples when its neighbourhood contrast is
+#: above this (or above the target error, whichever is larger).
+FLAG_CONTRAST = 0.02
+FLAG_DILATE = True
+#: A pixel's error is at least this share of its worst neighbour's.
+NEIGHBOUR_SHARE = 0.25
+#: Share of the budget left that one round may spend (the rest waits for
+#: the better estimates the round brings).
+ROUND_SHARE = 0.5
 
 
 @dataclass
@@ -207,15 +218,35 @@ def sliver_error(contrast: np.ndarray, n: int) -> np.ndarray:
     return SLIVER * contrast / n
 
 
-def round_schedule(max_spp: int, first: int = FIRST_ROUND) -> list[int]:
-    """Samples per active pixel after each round: 1, first, first x
-    ROUND_FACTOR, ... capped at max_spp (the last entry is max_spp)."""
-    out = [1]
-    n = first
-    while out[-1] < max_spp:
-        out.append(min(n, max_spp))
-        n *= ROUND_FACTOR
-    return out
+def estimated_error(sums: Sums, contrast: np.ndarray) -> np.ndarray:
+    """(H, W): what a pixel's mean is estimated to be off by: its own
+    samples' estimate (pixel_error), at least what they may have missed
+    (sliver_error), and at least half of its worst neighbour's (errors lie
+    along edges: a pixel whose few samples happen to agree beside one that
+    disagrees is not done)."""
+    n = np.maximum(sums.count, 1)
+    own = np.maximum(pixel_error(sums), SLIVER * contrast / n)
+    return np.maximum(own, NEIGHBOUR_SHARE * _neighbourhood(own, np.maximum))
+
+
+def choose_by_gain(want: np.ndarray, error: np.ndarray, count: np.ndarray, left: int,
+                   share: float = 0.5) -> np.ndarray:
+    """The pixels of `want` to take from n to ROUND_FACTOR x n samples next:
+    in order of error^2 / n (the squared error a 4x upgrade removes per
+    sample it costs), as many as `share` of the `left` budget pays for (at
+    least one pixel's upgrade when affordable; ties by position)."""
+    idx = np.flatnonzero(want.ravel())
+    if len(idx) == 0:
+        return np.zeros_like(want)
+    n = count.ravel()[idx]
+    cost = n * (ROUND_FACTOR - 1)
+    order = np.lexsort((idx, -(error.ravel()[idx] ** 2) / n))
+    spend = np.cumsum(cost[order])
+    cap = max(share * left, float(cost[order[0]]))
+    take = order[(spend <= cap) & (spend <= left)]
+    out = np.zeros(want.size, bool)
+    out[idx[take]] = True
+    return out.reshape(want.shape)
 
 
 def choose_within_budget(active: np.ndarray, error: np.ndarray, per_pixel: int, left: int) -> np.ndarray:
@@ -235,106 +266,313 @@ def choose_within_budget(active: np.ndarray, error: np.ndarray, per_pixel: int, 
     return out
 
 
-def active_rects(active: np.ndarray, tile: int) -> list[tuple[int, int, int, int]]:
-    """Scissor rectangles (x, y, w, h) in framebuffer pixels (y up): the
-    image cut into tile x tile squares (the renderer's draw size), and in
-    each the bounding box of its active pixels; squares without one are
-    left out.  active is (H, W) with the first row at the top."""
-    h, w = active.shape
-    fb = active[::-1]                                # framebuffer rows: bottom first
-    rects = []
-    for y in range(0, h, tile):
-        for x in range(0, w, tile):
-            sub = fb[y:y + tile, x:x + tile]
-            rows = np.flatnonzero(sub.any(axis=1))
-            if len(rows) == 0:
-                continue
-            cols = np.flatnonzero(sub.any(axis=0))
-            rects.append((x + int(cols[0]), y + int(rows[0]),
-                          int(cols[-1] - cols[0]) + 1, int(rows[-1] - rows[0]) + 1))
-    return rects
-
-
 # ---------------------------------------------------------------- the GPU part
+
+#: Width of the pixel-list framebuffer (a multiple of 4: a software
+#: rasteriser shades 4x4 blocks, which then hold list entries that are close
+#: in the image) and the most fragments one draw call traces (the renderer's
+#: 512x512 tiles: no draw long enough to trip a GPU watchdog).
+LIST_WIDTH = 64
+#: Samples traced per fragment and draw call (the shader's MAX_BATCH).
+MAX_BATCH = 32
+MAX_LIST_HEIGHT = 16384
+FRAGMENTS_PER_DRAW = 512 * 512
+
+
+def coherent_order(pixels: np.ndarray, width: int, tile: int = 8) -> np.ndarray:
+    """Flat pixel indices (j * width + i) sorted by tile x tile squares of
+    the image, row by row inside a square: neighbours in the list are
+    neighbours in the image, so their rays take similar paths (less SIMD
+    divergence)."""
+    i, j = pixels % width, pixels // width
+    tiles_x = (width + tile - 1) // tile
+    key = ((j // tile) * tiles_x + i // tile) * (tile * tile) + (j % tile) * tile + (i % tile)
+    return pixels[np.argsort(key, kind="stable")]
 
 
 class AdaptiveSampler:
-    """Owns the two accumulation targets and the mask texture for one image
-    size; `add(offsets, first_index, active)` traces samples for the active
-    pixels.  Used by render_adaptive and by the viewer."""
+    """The GPU side for one image size: ``first_pass`` traces sample 0 of
+    every pixel (with the first interaction of each camera ray);
+    ``add_samples`` traces more samples of a list of pixels only.  Results
+    come back as arrays; the sums are kept by the caller."""
 
     def __init__(self, renderer, width: int, height: int):
         self.renderer = renderer
         self.ctx: moderngl.Context = renderer.ctx
         self.width, self.height = width, height
-        ctx = self.ctx
-        self._total = ctx.texture((width, height), 4, dtype="f4")
-        self._moments = ctx.texture((width, height), 4, dtype="f4")
-        self.fbo = ctx.framebuffer(color_attachments=[self._total, self._moments])
-        self._mask = ctx.texture((width, height), 1, dtype="f1")
         self._vaos: dict[int, moderngl.VertexArray] = {}
-        self.clear()
+        self._list_tex = None
+        self._list_fbo = None
+        self._list_targets: list = []
+        self._list_size = (0, 0)
 
-    def clear(self) -> None:
-        self.fbo.clear(0.0, 0.0, 0.0, 0.0)
-
-    def _vao(self) -> tuple[moderngl.Program, moderngl.VertexArray]:
-        prog = self.renderer.variant(ADAPTIVE=1)
+    def _program(self, **defines) -> tuple[moderngl.Program, moderngl.VertexArray]:
+        prog = self.renderer.variant(ADAPTIVE=1, **defines)
         vao = self._vaos.get(id(prog))
         if vao is None:
             vao = self.ctx.vertex_array(prog, [])
             self._vaos[id(prog)] = vao
         return prog, vao
 
-    def add(self, offsets: np.ndarray, first_index: int, active: np.ndarray,
-            between: Callable[[], None] | None = None) -> int:
-        """Trace samples first_index, first_index + 1, ... (offsets[i] is the
-        offset of sample first_index + i) for the pixels where `active`
-        ((H, W) bool, top row first) is set.  between() is called after each
-        draw call (progress, Ctrl-C).  Returns the number of draw calls."""
-        ctx = self.ctx
-        rects = active_rects(active, self.renderer.tile)
-        if not rects:
-            return 0
-        mask = np.ascontiguousarray(active[::-1], dtype=np.uint8) * np.uint8(255)
-        self._mask.write(mask.tobytes())
-        prog, vao = self._vao()
-        self.fbo.use()
-        ctx.enable(moderngl.BLEND)
-        ctx.blend_func = moderngl.ONE, moderngl.ONE
-        ctx.blend_equation = moderngl.FUNC_ADD
-        self._mask.use(location=1)
+    def first_pass(self, offset=(0.5, 0.5)):
+        """Sample 0 of every pixel.  A generator that yields after each draw
+        call and returns (Sums of one sample, t (H, W), object (H, W) int,
+        outward normal (H, W, 3)) of the first interaction of each camera
+        ray (t = inf, object -1 for the sky)."""
+        ctx, (w, h) = self.ctx, (self.width, self.height)
+        prog, vao = self._program(ADAPTIVE_FIRST=1)
+        texs = [ctx.texture((w, h), 4, dtype="f4") for _ in range(4)]
+        fbo = ctx.framebuffer(color_attachments=texs)
         try:
-            for i, off in enumerate(offsets):
-                self.renderer.bind(prog, self.width, self.height, off)
-                prog["activeMask"].value = 1
-                prog["sampleParity"].value = float((first_index + i) % 2)
-                for rect in rects:
-                    # One full-screen triangle per rectangle, the scissor
-                    # keeping it to the rectangle.  (Small quads per tile cost
-                    # 50% more on llvmpipe: the 4x4 blocks on each quad's
-                    # diagonal are shaded once per triangle.)
-                    ctx.scissor = rect
-                    vao.render(moderngl.TRIANGLES, vertices=3)
-                    ctx.finish()
-                    if between is not None:
-                        between()
+            for rect in self.renderer.tiles(w, h):   # together they cover every pixel
+                # (re)bound before every draw: between yields the caller may
+                # have used the context for something else (the viewer)
+                fbo.use()
+                ctx.disable(moderngl.BLEND)
+                self.renderer.bind(prog, w, h, offset)
+                prog["sampleParity"].value = 0.0
+                ctx.scissor = rect
+                vao.render(moderngl.TRIANGLES, vertices=3)
+                ctx.finish()
+                ctx.scissor = None
+                yield
+            out = [np.frombuffer(fbo.read(attachment=k, components=4, dtype="f4"), np.float32)
+                   .reshape(h, w, 4)[::-1] for k in range(4)]
         finally:
             ctx.scissor = None
-            ctx.disable(moderngl.BLEND)
-        return len(rects) * len(offsets)
+            fbo.release()
+            for t in texs:
+                t.release()
+        sums = Sums(np.ascontiguousarray(out[0], np.float64), np.ascontiguousarray(out[1], np.float64))
+        obj = np.rint(out[2][..., 1]).astype(np.int32)
+        t = np.where(obj >= 0, out[2][..., 0], np.inf).astype(np.float64)
+        return sums, t, obj, np.ascontiguousarray(out[3][..., :3])
 
-    def read(self) -> "Sums":
-        """The per-pixel sums so far, top row first."""
-        shape = (self.height, self.width, 4)
-        return Sums(*(np.frombuffer(t.read(), np.float32).reshape(shape)[::-1]
-                      for t in (self._total, self._moments)))
+    def _list_target(self, lw: int, lh: int):
+        if self._list_size != (lw, lh):
+            self._release_list()
+            self._list_tex = self.ctx.texture((lw, lh), 2, dtype="i4")
+            self._list_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+            self._list_targets = [self.ctx.texture((lw, lh), 4, dtype="f4") for _ in range(2)]
+            self._list_fbo = self.ctx.framebuffer(color_attachments=self._list_targets)
+            self._list_size = (lw, lh)
+        return self._list_tex, self._list_fbo
+
+    def add_samples(self, pixels: np.ndarray, offsets: np.ndarray, first_index: int):
+        """Trace samples first_index, first_index + 1, ... (offsets[k] for
+        sample first_index + k) of the pixels with flat indices `pixels`
+        (j * W + i, j from the top row; listed in coherent_order).  A
+        generator: it yields after each draw call (the viewer's frames,
+        progress, Ctrl-C) and returns the sums (total (n, 4) = sum (L, 1),
+        moments (n, 4) = sum (L [odd sample index], L.L)) in the order of
+        `pixels`."""
+        ctx, w = self.ctx, self.width
+        n = len(pixels)
+        lw = LIST_WIDTH * max(1, -(-n // (LIST_WIDTH * MAX_LIST_HEIGHT)))
+        lh = max(1, -(-n // lw))
+        tex, fbo = self._list_target(lw, lh)
+        ij = np.full((lh * lw, 2), -1, np.int32)
+        ij[:n, 0] = pixels % w
+        ij[:n, 1] = pixels // w
+        tex.write(ij.tobytes())                    # row 0 of the texture = list entries 0..lw-1
+        prog, vao = self._program(ADAPTIVE_LIST=1)
+        # rows per draw: about FRAGMENTS_PER_DRAW pixel-samples in each
+        batch = min(MAX_BATCH, len(offsets))
+        rows = max(1, FRAGMENTS_PER_DRAW // (lw * batch))
+        fbo.use()
+        fbo.clear(0.0, 0.0, 0.0, 0.0)
+        for k0 in range(0, len(offsets), MAX_BATCH):
+            chunk = offsets[k0:k0 + MAX_BATCH]
+            padded = np.zeros((MAX_BATCH, 2))
+            padded[:len(chunk)] = chunk
+            for y in range(0, lh, rows):
+                # (re)bound before every draw: between yields the caller may
+                # have used the context for something else (the viewer)
+                self.renderer.bind(prog, w, self.height, (0.5, 0.5))
+                prog["pixelList"].value = 1
+                prog["batchSize"].value = len(chunk)
+                prog["firstSample"].value = int(first_index + k0)
+                prog["batchOffsets"].value = [tuple(map(float, o)) for o in padded]
+                fbo.use()
+                tex.use(location=1)
+                ctx.enable(moderngl.BLEND)
+                ctx.blend_func = moderngl.ONE, moderngl.ONE
+                ctx.blend_equation = moderngl.FUNC_ADD
+                ctx.scissor = (0, y, lw, min(rows, lh - y))
+                try:
+                    vao.render(moderngl.TRIANGLES, vertices=3)
+                    ctx.finish()
+                finally:
+                    ctx.scissor = None
+                    ctx.disable(moderngl.BLEND)
+                yield
+        total, moments = (np.frombuffer(fbo.read(attachment=a, components=4, dtype="f4"), np.float32)
+                          .reshape(lh * lw, 4)[:n] for a in (0, 1))
+        return total.astype(np.float64), moments.astype(np.float64)
+
+    def _release_list(self) -> None:
+        for obj in (self._list_fbo, self._list_tex, *self._list_targets):
+            if obj is not None:
+                obj.release()
+        self._list_fbo = self._list_tex = None
+        self._list_targets = []
+        self._list_size = (0, 0)
 
     def release(self) -> None:
+        self._release_list()
         for vao in self._vaos.values():
             vao.release()
-        for obj in (self.fbo, self._total, self._moments, self._mask):
-            obj.release()
+        self._vaos.clear()
+
+
+class AdaptiveRender:
+    """One adaptive render, advanced one GPU draw at a time by step() (the
+    viewer spreads it over frames) or to the end by run().  The sums live
+    here, in float64, per pixel: sum (L, 1) and sum (L [odd index], L.L)."""
+
+    def __init__(self, renderer, width: int, height: int, samples: int | None = None,
+                 target_error: float = DEFAULT_TARGET_ERROR, seed: int = 0, max_spp: int | None = None):
+        samples = int(samples or renderer.scene.render.samples)
+        self.width, self.height = width, height
+        self.samples = samples
+        self.target_error = float(target_error)
+        self.max_spp = int(max_spp or min(MAX_SPP_FACTOR * samples, MAX_SPP))
+        self.budget = samples * width * height
+        self.offsets = progressive_offsets(self.max_spp, seed)
+        self.sampler = AdaptiveSampler(renderer, width, height)
+        self.total = np.zeros((height, width, 4))
+        self.moments = np.zeros((height, width, 4))
+        self.spent = 0                    # pixel-samples traced
+        self.draws_done = 0
+        self.rounds: list[tuple[int, int]] = []
+        self.done = False
+        self._gen = self._run()
+
+    # ------------------------------------------------------------ driving
+
+    def step(self) -> bool:
+        """Run one draw call (and the bookkeeping after it); True when done."""
+        if self.done:
+            return True
+        try:
+            next(self._gen)
+        except StopIteration:
+            self.done = True
+        return self.done
+
+    def run(self, progress: Callable[[int, int], None] | None = None) -> "AdaptiveResult":
+        while not self.step():
+            if progress is not None:
+                progress(min(self.spent, self.budget), self.budget)
+        if progress is not None:
+            progress(self.budget, self.budget)
+        return self.result()
+
+    # ------------------------------------------------------------ results
+
+    @property
+    def spp(self) -> np.ndarray:
+        return np.rint(self.total[..., 3]).astype(np.int32)
+
+    def image(self) -> np.ndarray:
+        """(H, W, 3) float32: the mean of each pixel's samples so far."""
+        return (self.total[..., :3] / np.maximum(self.total[..., 3:], 1)).astype(np.float32)
+
+    def result(self) -> "AdaptiveResult":
+        return AdaptiveResult(np.ascontiguousarray(self.image()), self.spp, list(self.rounds))
+
+    def release(self) -> None:
+        if self._gen is not None:
+            self._gen.close()
+            self._gen = None
+        self.sampler.release()
+        self.done = True
+
+    # ------------------------------------------------------------ the work
+
+    def _run(self):
+        w, h = self.width, self.height
+        renderer = self.sampler.renderer
+
+        gen = self.sampler.first_pass((0.5, 0.5))
+        while True:
+            try:
+                next(gen)
+            except StopIteration as stop:
+                sums, t, obj, normal = stop.value
+                break
+            self.draws_done += 1
+            yield
+        self.total[...] = sums.total
+        self.moments[...] = sums.moments
+        self.spent = w * h
+        self.rounds.append((1, w * h))
+        contrast = colour_contrast(sums.mean)
+        self._contrast = contrast.astype(np.float32)
+        self._own = (SLIVER * self._contrast).astype(np.float32)   # one sample: no spread known yet
+        flagged = ((contrast > max(self.target_error, FLAG_CONTRAST)) | first_hit_edges(t, obj, normal)
+                   | checker_aliasing(renderer.scene, t, obj))
+        if FLAG_DILATE:
+            flagged = _neighbourhood(flagged, np.maximum)
+        # Every flagged pixel first goes to FIRST_ROUND samples (a spread
+        # needs several), the most contrasted first if the budget is short.
+        chosen = choose_within_budget(flagged, contrast, FIRST_ROUND - 1, self.budget - self.spent)
+        yield from self._upgrade(chosen)
+        # Then, round by round, the pixels whose estimated error is above the
+        # target and largest for its cost take 4x their samples, until the
+        # budget is spent.  A pixel that is not flagged keeps one sample.
+        while True:
+            count = self.total[..., 3]
+            error = np.maximum(self._own, NEIGHBOUR_SHARE * _neighbourhood(self._own, np.maximum))
+            want = flagged & (error > self.target_error) & (count * ROUND_FACTOR <= self.max_spp)
+            left = self.budget - self.spent
+            chosen = choose_by_gain(want, error, count, left, ROUND_SHARE)
+            if not chosen.any():
+                break
+            yield from self._upgrade(chosen)
+
+    def _refresh_own(self, flat: np.ndarray) -> None:
+        """A pixel's own error estimate (estimated_error before the
+        neighbours' share), for the pixels just sampled."""
+        tot = self.total.reshape(-1, 4)[flat]
+        mom = self.moments.reshape(-1, 4)[flat]
+        sums = Sums(tot[:, None], mom[:, None])
+        n = np.maximum(tot[:, 3], 1)
+        own = np.maximum(pixel_error(sums)[:, 0], SLIVER * self._contrast.ravel()[flat] / n)
+        self._own.ravel()[flat] = own
+
+    def _upgrade(self, chosen: np.ndarray):
+        """Take every chosen pixel from n to ROUND_FACTOR x n samples (n =
+        FIRST_ROUND / ROUND_FACTOR... for pixels at one sample: to
+        FIRST_ROUND), one list per current count."""
+        count = np.rint(self.total[..., 3]).astype(np.int64).ravel()
+        flat_all = np.flatnonzero(chosen.ravel())
+        if len(flat_all) == 0:
+            return
+        for n in np.unique(count[flat_all]):
+            flat = coherent_order(flat_all[count[flat_all] == n], self.width)
+            n_next = FIRST_ROUND if n == 1 else int(n) * ROUND_FACTOR
+            n_next = min(n_next, self.max_spp)
+            yield from self._add(flat, int(n), n_next)
+            self.rounds.append((n_next, len(flat)))
+
+    def _add(self, flat: np.ndarray, n_prev: int, n: int):
+        """Samples n_prev .. n - 1 of the pixels `flat` (all at n_prev)."""
+        drawn = 0
+        gen = self.sampler.add_samples(flat, self.offsets[n_prev:n], n_prev)
+        while True:
+            try:
+                next(gen)
+            except StopIteration as stop:
+                tot, mom = stop.value
+                break
+            self.draws_done += 1
+            drawn += 1
+            yield
+        self.total.reshape(-1, 4)[flat] += tot
+        self.moments.reshape(-1, 4)[flat] += mom
+        self.spent += len(flat) * (n - n_prev)
+        self._refresh_own(flat)
 
 
 def render_adaptive(renderer, width: int, height: int, samples: int | None = None,
@@ -347,55 +585,8 @@ def render_adaptive(renderer, width: int, height: int, samples: int | None = Non
     pixel takes at most max_spp (default MAX_SPP_FACTOR x samples).  When the
     budget runs short, the pixels with the largest estimated error go first.
     The image converges to the same box-filtered picture as Renderer.render."""
-    samples = samples or renderer.scene.render.samples
-    max_spp = max_spp or min(MAX_SPP_FACTOR * samples, MAX_SPP)
-    budget = samples * width * height
-    offsets = progressive_offsets(max_spp, seed)
-    sampler = AdaptiveSampler(renderer, width, height)
-    rounds: list[tuple[int, int]] = []
-    spent = 0
-
-    def tick(per_draw: int, total: int):
-        def step() -> None:
-            nonlocal spent
-            spent += per_draw
-            if progress is not None:
-                progress(min(spent, total), total)
-        return step
-
+    job = AdaptiveRender(renderer, width, height, samples, target_error, seed, max_spp)
     try:
-        active = np.ones((height, width), bool)
-        error = np.zeros((height, width))
-        n_prev = 0
-        for n in round_schedule(max_spp):
-            active = choose_within_budget(active, error, n - n_prev, budget - spent)
-            count = int(active.sum())
-            if count == 0:
-                break
-            draws = len(active_rects(active, renderer.tile)) * (n - n_prev)
-            before = spent
-            sampler.add(offsets[n_prev:n], n_prev, active, tick(count * (n - n_prev) // draws, budget))
-            spent = before + count * (n - n_prev)
-            rounds.append((n, count))
-            if n >= max_spp:
-                break
-            sums = sampler.read()
-            if n == 1:
-                t, obj, normal = renderer.first_hits(width, height)
-                active = ((colour_contrast(sums.mean) > target_error) | first_hit_edges(t, obj, normal)
-                          | checker_aliasing(renderer.scene, t, obj))
-                # before any spread is known, the neighbourhood contrast ranks
-                contrast = colour_contrast(sums.mean)
-                error = contrast
-            else:
-                error = np.maximum(pixel_error(sums), sliver_error(contrast, n))
-                active &= error > target_error
-            n_prev = n
-        if progress is not None:
-            progress(budget, budget)
-        total = sampler.read().total
+        return job.run(progress)
     finally:
-        sampler.release()
-    spp = np.rint(total[..., 3]).astype(np.int32)
-    image = total[..., :3] / np.maximum(total[..., 3:], 1)
-    return AdaptiveResult(np.ascontiguousarray(image, np.float32), spp, rounds)
+        job.release()

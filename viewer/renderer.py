@@ -45,6 +45,8 @@ class Renderer:
         self._sky: moderngl.Texture | None = None
         self._sky_path = None
         self._fbo: moderngl.Framebuffer | None = None
+        self._camera_key = None
+        self._camera: dict = {}
         self._fbo_tex: moderngl.Texture | None = None
         self.scene: Scene | None = None
         self.program: moderngl.Program | None = None
@@ -120,9 +122,12 @@ class Renderer:
         prog["SceneBlock"].binding = 0
         self._ubo.bind_to_uniform_block(0)
         self._sky.use(location=0)
+        c = self.scene.camera
+        key = (tuple(c.position), tuple(c.target), c.fov, width, height)
+        if self._camera_key != key:      # computed once per camera and size
+            self._camera_key, self._camera = key, camera_uniforms(self.scene, width, height)
         values = {"skyImage": 0, "imageSize": (float(width), float(height)),
-                  "sampleOffset": (float(offset[0]), float(offset[1])),
-                  **camera_uniforms(self.scene, width, height)}
+                  "sampleOffset": (float(offset[0]), float(offset[1])), **self._camera}
         for name, v in values.items():
             if name in prog:
                 prog[name].value = v
