@@ -126,27 +126,35 @@ def object_shape(obj: SceneObject) -> int:
     return SHAPE_VESSEL if obj.type == "cylinder" and obj.wall else OBJ_TYPES[obj.type]
 
 
-def object_list_macros(scene: Scene) -> dict[str, str]:
+def object_list_macros(scene: Scene, subset: tuple[int, ...] | None = None) -> dict[str, str]:
     """The scene's objects as X-macros for the specialised shader (see
     FOR_EACH_OBJECT in trace.frag): SCENE_OBJECTS(X) lists X(k, shape, slot)
     per object (slot: transparent slot, -1 opaque), SCENE_MEDIA(X) lists
     X(slot, k, shape) per transparent object.  Only the structure (shapes,
     order, which objects are transparent) goes in: every value stays in the
-    uniform block, so editing one never recompiles."""
+    uniform block, so editing one never recompiles.  `subset`: only these
+    object indices are listed (viewer/culling.py); slots keep their numbers."""
     objects, media = [], []
+    slot_of = 0
     for k, o in enumerate(scene.objects):
         shape = object_shape(o)
-        slot = len(media) if scene.is_transparent(o) else -1
+        slot = slot_of if scene.is_transparent(o) else -1
+        slot_of += slot >= 0
+        if subset is not None and k not in subset:
+            continue
         if slot >= 0:
             media.append(f"X({slot},{k},{shape})")
         objects.append(f"X({k},{shape},{slot})")
     return {"SCENE_OBJECTS(X)": " ".join(objects), "SCENE_MEDIA(X)": " ".join(media)}
 
 
-def shader_defines(scene: Scene, specialise: bool = True, fresnel: str = "exact") -> dict[str, object]:
+def shader_defines(scene: Scene, specialise: bool = True, fresnel: str = "exact",
+                   subset: tuple[int, ...] | None = None) -> dict[str, object]:
     """Compile-time constants of the shader for this scene: counts, the
     features present and the object list (specialise=True), or the generic
-    all-features shader."""
+    all-features shader.  `subset` (object indices): a shader for the part
+    of the image that can meet only those objects (viewer/culling.py): the
+    features are theirs, the counts and the block stay the scene's."""
     extra: dict[str, object] = {"FRESNEL_SCHLICK": True} if fresnel == "schlick" else {}
     if not specialise:
         return {"GENERIC": True, **GENERIC_LENS, "STACK_SIZE": GENERIC_STACK, "HAS_LIGHTS": True,
@@ -154,22 +162,23 @@ def shader_defines(scene: Scene, specialise: bool = True, fresnel: str = "exact"
                 "HAS_DIELECTRIC": True, "HAS_REFLECTION": True, "HAS_SKY_IMAGE": True, **extra}
     n_obj = len(scene.objects)
     n_tr = sum(scene.is_transparent(o) for o in scene.objects)
-    used = [scene.materials[o.material] for o in scene.objects]
+    present = [o for k, o in enumerate(scene.objects) if subset is None or k in subset]
+    used = [scene.materials[o.material] for o in present]
     d: dict[str, object] = {
         "NUM_OBJECTS": n_obj, "OBJECTS_LEN": max(1, n_obj),
         "MATERIALS_LEN": max(1, len(scene.materials)),
         "NUM_LIGHTS": len(scene.lights), "LIGHTS_LEN": max(1, len(scene.lights)),
         "NUM_TRANSPARENT": n_tr, "MEDIA_LEN": max(1, n_tr),
         "STACK_SIZE": scene.render.max_depth + 1,
-        **object_list_macros(scene),
+        **object_list_macros(scene, subset),
         **extra,
     }
     if scene.lights:
         d["HAS_LIGHTS"] = True
     for t in OBJ_TYPES:
-        if any(o.type == t for o in scene.objects):
+        if any(o.type == t for o in present):
             d[f"HAS_{t.upper()}"] = True
-    if n_tr:
+    if any(scene.is_transparent(o) for o in present):
         d["HAS_DIELECTRIC"] = True
     if any(m.reflectivity > 0 for m in used):
         d["HAS_REFLECTION"] = True

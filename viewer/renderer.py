@@ -27,7 +27,26 @@ from .shaders import build_program
 DEFAULT_TILE = 512
 
 
+#: Scenes with more objects are drawn unculled: a shader listing dozens of
+#: objects takes seconds to compile on llvmpipe, and culling would compile
+#: several (bench-many, 43 objects: 5 s each).
+CULL_MAX_OBJECTS = 24
+
+
+def _intersect(a: tuple[int, int, int, int], b: tuple[int, int, int, int]) -> tuple[int, int, int, int] | None:
+    x0, y0 = max(a[0], b[0]), max(a[1], b[1])
+    x1, y1 = min(a[0] + a[2], b[0] + b[2]), min(a[1] + a[3], b[1] + b[3])
+    return (x0, y0, x1 - x0, y1 - y0) if x1 > x0 and y1 > y0 else None
+
+
 class Renderer:
+    #: Draw the specialised shader per group of screen tiles, each with the
+    #: objects its rays can meet (viewer/culling.py).  Off for renderers
+    #: whose camera is not the scene's (viewer/quality.py's window).
+    cull = True
+    COMPILES_PER_DRAW = 1
+    SUBSET_PROGRAMS = 16
+
     def __init__(self, ctx: moderngl.Context, scene: Scene, tile: int = DEFAULT_TILE,
                  specialise: bool = True, fresnel: str = "exact", extra_defines: dict | None = None):
         """specialise=False uses the generic all-features shader and
@@ -40,6 +59,8 @@ class Renderer:
         self.fresnel = fresnel
         self.extra_defines = dict(extra_defines or {})
         self._programs: dict[tuple, moderngl.Program] = {}
+        self._subset_programs: dict[tuple, moderngl.Program] = {}
+        self._plan = None
         self._vao_for: dict[int, moderngl.VertexArray] = {}
         self._ubo: moderngl.Buffer | None = None
         self._sky: moderngl.Texture | None = None
@@ -58,7 +79,8 @@ class Renderer:
         """Upload a scene; recompiles only when its feature key changes."""
         packed = pack_scene(scene, self.specialise, self.fresnel)
         self._defines = {**packed.defines, **self.extra_defines}
-        self.program = self._program(self._defines)
+        self.program = self._main = self._program(self._defines)
+        self._plan_key = self._plan = None
         if self._ubo is None or self._ubo.size != len(packed.block):
             if self._ubo is not None:
                 self._ubo.release()
@@ -98,11 +120,7 @@ class Renderer:
         self._sky, self._sky_path = tex, path
 
     def _vao(self) -> moderngl.VertexArray:
-        vao = self._vao_for.get(id(self.program))
-        if vao is None:
-            vao = self.ctx.vertex_array(self.program, [])
-            self._vao_for[id(self.program)] = vao
-        return vao
+        return self._vao_of(self.program)
 
     # ------------------------------------------------------------ drawing
 
@@ -110,11 +128,84 @@ class Renderer:
                     viewport: tuple[int, int, int, int] | None = None) -> None:
         """Trace one sample per pixel of the bound framebuffer (additively if
         blending is on).  viewport limits the work to a rectangle (x, y, w, h)
-        in framebuffer pixels, bottom-left origin."""
+        in framebuffer pixels, bottom-left origin.  The specialised shader
+        draws each group of screen tiles with a variant compiled for the
+        objects its rays can meet (viewer/culling.py); the image is the same."""
+        if (self.cull and self.specialise and self.program is self._main
+                and 0 < len(self.scene.objects) <= CULL_MAX_OBJECTS):
+            for prog, rects in self._culled(width, height):
+                self.bind(prog, width, height, offset)
+                vao = self._vao_of(prog)
+                for rect in rects:
+                    clipped = rect if viewport is None else _intersect(rect, viewport)
+                    if clipped is None:
+                        continue
+                    self.ctx.scissor = clipped
+                    vao.render(moderngl.TRIANGLES, vertices=3)
+            self.ctx.scissor = None
+            return
         self.bind(self.program, width, height, offset)
         self.ctx.scissor = viewport
         self._vao().render(moderngl.TRIANGLES, vertices=3)
         self.ctx.scissor = None
+
+    def _culled(self, width: int, height: int) -> list[tuple[moderngl.Program, tuple]]:
+        """The culling plan of this camera and size, its programs compiled."""
+        from . import culling
+        from .gpu_scene import shader_defines
+
+        key = culling.plan_key(self.scene, width, height)
+        if key != self._plan_key:
+            self._plan_key = key
+            self._plan_groups = culling.plan(self.scene, width, height).groups
+            self._plan = None
+        if self._plan is None:
+            # Compile at most COMPILES_PER_DRAW new variants per call (a
+            # compile costs up to seconds on llvmpipe); until its variant is
+            # ready a group is drawn with the scene's full shader, which is
+            # exact everywhere.
+            everything = tuple(range(len(self.scene.objects)))
+            compiled, complete, progs = 0, True, []
+            for subset, rects in self._plan_groups:
+                prog = self._main
+                if subset != everything:
+                    defines = {**shader_defines(self.scene, True, self.fresnel, subset), **self.extra_defines}
+                    k = ("fullscreen.vert", *sorted(defines.items()))
+                    if k in self._subset_programs or compiled < self.COMPILES_PER_DRAW:
+                        compiled += k not in self._subset_programs
+                        prog = self._subset_program(k, defines)
+                    else:
+                        complete = False
+                progs.append((prog, rects))
+            if complete:
+                self._plan = progs
+            return progs
+        return self._plan
+
+    def _subset_program(self, key: tuple, defines: dict) -> moderngl.Program:
+        """A culling variant, from a cache of the SUBSET_PROGRAMS most
+        recently used (a viewer orbiting a scene meets new subsets all the
+        time; the GL objects must not pile up)."""
+        prog = self._subset_programs.pop(key, None)
+        if prog is None:
+            prog = build_program(self.ctx, defines=defines)
+        self._subset_programs[key] = prog          # most recent last
+        in_use = {id(p) for p, _ in (self._plan or ())}
+        while len(self._subset_programs) > self.SUBSET_PROGRAMS:
+            old_key = next(k for k, p in self._subset_programs.items() if id(p) not in in_use and k != key)
+            old = self._subset_programs.pop(old_key)
+            vao = self._vao_for.pop(id(old), None)
+            if vao is not None:
+                vao.release()
+            old.release()
+        return prog
+
+    def _vao_of(self, prog: moderngl.Program) -> moderngl.VertexArray:
+        vao = self._vao_for.get(id(prog))
+        if vao is None:
+            vao = self.ctx.vertex_array(prog, [])
+            self._vao_for[id(prog)] = vao
+        return vao
 
     def bind(self, prog: moderngl.Program, width: int, height: int, offset: tuple[float, float]) -> None:
         """Bind the scene block, the sky (texture unit 0) and the per-draw
@@ -241,8 +332,9 @@ class Renderer:
         self._release_target()
         for vao in self._vao_for.values():
             vao.release()
-        for prog in self._programs.values():
+        for prog in (*self._programs.values(), *self._subset_programs.values()):
             prog.release()
+        self._subset_programs.clear()
         for res in (self._ubo, self._sky):
             if res is not None:
                 res.release()

@@ -1,0 +1,156 @@
+"""Screen-tile culling (viewer/culling.py): every tile drawn with a shader
+that lists only the objects its rays can meet must give the image of the
+scene's full shader, bit for bit, and the plans must really leave objects
+out where they can."""
+
+from __future__ import annotations
+
+import copy
+import math
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from viewer import culling
+from viewer.renderer import Renderer
+from viewer.scene import load_scene, scene_from_dict, with_overrides
+
+
+def _pair(gl, scene):
+    culled = Renderer(gl, scene)
+    culled.COMPILES_PER_DRAW = 99           # every variant at once: the image is then fully culled
+    full = Renderer(gl, scene)
+    full.cull = False
+    return culled, full
+
+
+def _same(gl, scene, w, h, samples=1):
+    culled, full = _pair(gl, scene)
+    try:
+        a = culled.render(w, h, samples)
+        b = full.render(w, h, samples)
+        plan = culling.plan(scene, w, h)
+    finally:
+        culled.release()
+        full.release()
+    return a, b, plan
+
+
+@pytest.mark.parametrize("name", ["default", "bench-opaque", "glass-sphere", "mirror-ball", "glass-rod-x",
+                                  "coloured-liquid", "whitted-exact"])
+def test_culled_image_equals_the_full_shader(gl, name):
+    scene = load_scene(name)
+    a, b, plan = _same(gl, scene, 160, 90, samples=2)
+    assert np.array_equal(a, b)
+    n = len(scene.objects)
+    # and something was really culled: some tiles use fewer objects (the
+    # glass rod's reflections and refractions reach every tile of its view)
+    if name != "glass-rod-x":
+        assert any(len(subset) < n for subset, _ in plan.groups), plan.groups
+
+
+def _shadow_scene():
+    """A floor seen from above and a sphere outside the view that shadows
+    part of it: the tiles of the shadow must keep the sphere."""
+    return scene_from_dict({
+        "camera": {"position": [0, 6, 0.01], "target": [0, 0, 0], "fov": 30},
+        "lights": [{"position": [6, 3, 0]}],
+        "materials": {"floor": {"color": [0.8, 0.8, 0.8]}, "ball": {"color": [0.8, 0.2, 0.2]}},
+        "objects": [{"type": "plane", "material": "floor"},
+                    {"type": "sphere", "center": [2.6, 1.0, 0], "radius": 0.5, "material": "ball"}],
+    }, "shadow.toml")
+
+
+def test_a_caster_outside_the_view_is_kept_where_its_shadow_falls(gl):
+    scene = _shadow_scene()
+    w, h = 192, 192
+    a, b, plan = _same(gl, scene, w, h)
+    assert np.array_equal(a, b)
+    # the sphere is not in view: the picture is floor only, with a shadow
+    lit = a[..., 0].max()
+    assert (a[..., 0] < 0.5 * lit).mean() > 0.005       # the shadow is there
+    with_sphere = [rects for subset, rects in plan.groups if 1 in subset]
+    without = [rects for subset, rects in plan.groups if 1 not in subset]
+    assert with_sphere and without                      # kept in some tiles, culled in others
+    # every shadowed pixel lies in a tile that keeps the sphere
+    keep = np.zeros((h, w), bool)
+    for rects in with_sphere:
+        for x, y, rw, rh in rects:
+            keep[h - (y + rh):h - y, x:x + rw] = True
+    assert np.all(keep[a[..., 0] < 0.5 * lit])
+
+
+def test_reflective_or_transparent_tiles_get_every_object(gl):
+    scene = load_scene("mirror-ball")
+    labels, subsets = culling.tile_subsets(scene, 160, 90)
+    ball = next(k for k, o in enumerate(scene.objects)
+                if scene.materials[o.material].reflectivity > 0)
+    everything = tuple(range(len(scene.objects)))
+    # a tile through the mirror ball's centre needs everything
+    eye = np.array(scene.camera.position)
+    c = np.array(scene.objects[ball].center) - eye
+    from viewer.gpu_scene import camera_uniforms
+    cam = camera_uniforms(scene, 160, 90)
+    f, r, u = (np.array(cam[k]) for k in ("camForward", "camRight", "camUp"))
+    # solve c ~ s (f + a r + b u): a, b from projections
+    s = c @ f
+    a, b = (c @ r) / (s * (r @ r)), (c @ u) / (s * (u @ u))
+    i, j = int((a + 1) / 2 * 160), int((1 - b) / 2 * 90)
+    assert subsets[labels[j // culling.TILE, i // culling.TILE]] == everything
+
+
+def test_the_sky_alone_needs_no_object(gl):
+    scene = load_scene("whitted-exact")
+    scene = copy.deepcopy(scene)
+    scene.camera.target = (0.0, 10.0, -1.0)               # looking up, past everything
+    scene.camera.position = (0.0, 1.4, 4.0)
+    labels, subsets = culling.tile_subsets(scene, 64, 64)
+    assert all(subsets[g] == () for g in np.unique(labels))
+    a, b, _ = _same(gl, scene, 64, 64)
+    assert np.array_equal(a, b)
+
+
+@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(az=st.floats(0, 2 * math.pi), el=st.floats(0.05, 1.3), dist=st.floats(2.5, 9.0),
+       lx=st.floats(-6, 6), lz=st.floats(-6, 6), ly=st.floats(0.5, 8))
+def test_random_cameras_and_lights_give_the_same_image(gl, az, el, dist, lx, lz, ly):
+    """Hypothesis-drawn orbits and light positions around the opaque bench
+    scene (shadows everywhere, tiles of every kind)."""
+    base = load_scene("bench-opaque")
+    scene = copy.deepcopy(base)
+    t = np.array(scene.camera.target)
+    scene.camera.position = tuple(t + dist * np.array([math.cos(el) * math.cos(az), math.sin(el),
+                                                       math.cos(el) * math.sin(az)]))
+    scene.lights[0].position = (lx, ly, lz)
+    a, b, _ = _same(gl, with_overrides(scene, samples=1), 64, 36)
+    assert np.array_equal(a, b)
+
+
+def test_merge_keeps_supersets_and_the_limit():
+    labels = np.array([[0, 1, 2], [3, 4, 0]])
+    subsets = [(0,), (0, 1), (0, 2), (0, 1, 2, 3), (4,)]
+    new_labels, merged = culling.merge_subsets(labels, subsets, 5, max_variants=2)
+    assert len(merged) <= 2
+    for old, new in zip(labels.ravel(), new_labels.ravel()):
+        assert set(subsets[old]) <= set(merged[new])      # a tile only ever gains objects
+
+
+def test_rectangles_cover_exactly_the_tiles():
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        mask = rng.random((5, 7)) < 0.5
+        w, h, tile = 7 * 8 - 3, 5 * 8 - 5, 8                 # partial tiles at the right and bottom
+        cover = np.zeros((h, w), int)
+        for x, y, rw, rh in culling.rectangles(mask, tile, w, h):
+            cover[h - (y + rh):h - y, x:x + rw] += 1
+        want = np.kron(mask, np.ones((tile, tile), int))[:h, :w]
+        assert np.array_equal(cover, want)                 # no gaps, no overlaps
+
+
+def test_segment_distance():
+    a, b = np.array([0.0, 0, 0]), np.array([2.0, 0, 0])
+    p = np.array([[1.0, 1, 0], [-1.0, 0, 0], [3.0, 0, 1]])
+    np.testing.assert_allclose(culling._segment_distance(p, a, b, None), [1, 1, math.sqrt(2)])
+    np.testing.assert_allclose(culling._segment_distance(p, a, None, np.array([1.0, 0, 0])), [1, 1, 1])
