@@ -349,7 +349,9 @@ def _window_renderer_class():
         changed so that the shader's own formula gives exactly that ray."""
         full: tuple[int, int] | None = None
         shift: tuple[int, int] = (0, 0)
-        cull = False      # the tiles it draws are not the scene camera's
+        @property
+        def cull(self):   # a window's tiles are not the scene camera's: cull only the whole picture
+            return self.full is None
 
         def bind(self, prog, width, height, offset):
             super().bind(prog, width, height, offset)
