@@ -7,12 +7,15 @@ from __future__ import annotations
 import csv
 import json
 import math
+import re
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 
+from conftest import make_scene
 from viewer import bench
 
 
@@ -124,14 +127,162 @@ def test_sweep_covers_every_knob():
     scene = load_scene("default")
     full = bench.sweep(scene, reference_samples=64)
     assert full[0].label == "default"
-    assert full[0].key() == (scene.render.max_depth, scene.render.samples, scene.render.min_weight, 1.0, True, "exact")
+    assert full[0].key() == (scene.render.max_depth, scene.render.samples, scene.render.min_weight, 1.0, True, "exact",
+                             None)
+    assert full[0].adaptive is None
     assert len({s.key() for s in full}) == len(full)
     assert len({s.label for s in full}) == len(full)
-    for knob in ("max_depth=", "samples=", "min_weight=", "scale=", "generic", "schlick"):
+    for knob in ("max_depth=", "samples=", "min_weight=", "scale=", "generic", "schlick", "adaptive "):
         assert any(s.label.startswith(knob) for s in full), knob
     assert all(s.samples < 64 for s in full if s.samples != scene.render.samples)
     quick = bench.sweep(scene, quick=True, reference_samples=4)
     assert 2 <= len(quick) <= 8 and quick[0].label == "default"
+    assert sum(s.adaptive is not None for s in quick) == 1
+
+
+def test_sweep_adaptive_points():
+    from viewer.scene import load_scene
+
+    scene = load_scene("glass-sphere")
+    n = scene.render.samples
+    full = bench.sweep(scene, reference_samples=128)
+    ad = [s for s in full if s.adaptive is not None]
+    assert 3 <= len(ad) <= 8
+    # the scene's own samples and larger budgets, more than one target
+    assert n in {s.samples for s in ad} and max(s.samples for s in ad) > n
+    assert len({s.adaptive for s in ad}) >= 2
+    for s in ad:
+        assert s.label == f"adaptive e={s.adaptive:g} spp<={s.samples}"
+        assert 0 < s.adaptive < 1
+        # only the sampling differs from the scene's own settings
+        assert (s.max_depth, s.min_weight, s.scale, s.specialise, s.fresnel) == \
+               (scene.render.max_depth, scene.render.min_weight, 1.0, True, "exact")
+        # every adaptive budget has a uniform counterpart at the same samples
+        assert any(u.adaptive is None and u.samples == s.samples for u in full), s
+    # a budget at or above the reference's samples is left out, like a uniform sample count
+    assert all(s.samples < 32 or s.samples == n for s in bench.sweep(scene, reference_samples=32))
+    uniform = [s for s in full if s.adaptive is None]
+    assert len(uniform) == len(full) - len(ad) and all(s.key()[-1] is None for s in uniform)
+
+
+# A plain, unchecked floor seen from above: no silhouette, no normal or depth
+# jump, no checker, so with an unreachable target no pixel is flagged and
+# adaptive sampling stops after its first (centred) pass.
+_FLAT_FLOOR = {"camera": {"position": [0, 4, 2], "target": [0, 0, 0], "fov": 30},
+               "render": {"samples": 4, "max_depth": 4},
+               "lights": [{"type": "point", "position": [1, 5, 1]}],
+               "materials": {"floor": {"color": [0.6, 0.5, 0.4]}},
+               "objects": [{"type": "plane", "material": "floor"}]}
+
+
+def test_adaptive_setting_with_huge_target_is_one_centred_sample(gl, monkeypatch):
+    """An adaptive setting whose target nothing misses: every pixel stops
+    after the first pass, so bench_scene reports a mean of 1 sample per
+    pixel and the image of a 1-sample uniform render (the reference passed
+    in here, from Renderer.render: RMSE and max error 0).  The warm-up and
+    every timed render of an adaptive setting go through render_adaptive."""
+    import viewer.adaptive
+    from viewer.renderer import Renderer
+
+    calls = []
+    real = viewer.adaptive.render_adaptive
+
+    def counting(renderer, width, height, samples, target_error, seed=0, **kw):
+        calls.append((width, height, samples, target_error, seed))
+        return real(renderer, width, height, samples, target_error, seed=seed, **kw)
+
+    monkeypatch.setattr(viewer.adaptive, "render_adaptive", counting)
+
+    w, h = 12, 8
+    scene = make_scene(_FLAT_FLOOR, "flat-floor")
+    r = Renderer(gl, scene)
+    try:
+        one = r.render(w, h, 1, bench.RENDER_SEED).astype(np.float64)
+        four = r.render(w, h, 4, bench.RENDER_SEED).astype(np.float64)
+    finally:
+        r.release()
+    assert np.abs(four - one).max() > 1e-5          # the test can tell 1 sample from 4
+    base = bench.sweep(scene)[0]
+    huge = bench.Setting("adaptive huge", base.max_depth, 4, base.min_weight, adaptive=1e9)
+    tight = bench.Setting("adaptive tight", base.max_depth, 4, base.min_weight, adaptive=1e-6)
+    results = bench.bench_scene(gl, scene, "flat-floor", [base, huge, tight], w, h, 2, one)
+    # warm-up and 2 timed renders each, at the bench's seed
+    assert sorted(calls) == sorted([(w, h, 4, 1e9, bench.RENDER_SEED)] * 3 + [(w, h, 4, 1e-6, bench.RENDER_SEED)] * 3)
+    res = {x.setting.label: x for x in results}
+    assert res["adaptive huge"].mean_spp == 1.0
+    assert res["adaptive huge"].errors["rmse"] == 0.0 and res["adaptive huge"].errors["max_abs"] == 0.0
+    # the uniform setting renders its 4 samples; a tight target spends more than one on average
+    assert res["default"].mean_spp is None and res["default"].spp_used == 4.0
+    assert res["default"].errors["rmse"] > 0.0
+    assert 1.0 < res["adaptive tight"].mean_spp <= 4.0
+    for x in results:
+        assert len(x.times) == len(x.cpu_times) == 2 and min(x.times) > 0
+    rows = [bench._row(x) for x in results]
+    assert [row["mean_spp"] for row in rows][:2] == ["4", "1.0000"]
+    assert [row["adaptive_target"] for row in rows] == ["", "1e+09", "1e-06"]
+
+
+def test_adaptive_setting_on_a_real_scene_at_one_sample_budget(gl):
+    """glass-sphere (silhouettes, a checker: pixels that adaptive sampling
+    flags) with a budget of one sample per pixel: nothing left to spend after
+    the first pass, so again the uniform 1-sample image."""
+    from viewer.renderer import Renderer
+    from viewer.scene import load_scene
+
+    w, h = 16, 9
+    scene = load_scene("glass-sphere")
+    r = Renderer(gl, scene)
+    try:
+        one = r.render(w, h, 1, bench.RENDER_SEED).astype(np.float64)
+    finally:
+        r.release()
+    base = bench.sweep(scene)[0]
+    st = bench.Setting(bench.adaptive_label(0.005, 1), base.max_depth, 1, base.min_weight, adaptive=0.005)
+    [res] = bench.bench_scene(gl, scene, "glass-sphere", [st], w, h, 1, one)
+    assert res.mean_spp == 1.0 and res.errors["max_abs"] == 0.0
+
+
+def test_adaptive_front_summary():
+    """The summary says which adaptive settings are on the front and which
+    uniform points of the uniform-only front they push off it."""
+    def result(label, t, e, adaptive=None, samples=16):
+        st = bench.Setting(label, 8, samples, 1e-3, adaptive=adaptive)
+        return bench.Result("s", st, 4, 4, times=[t], cpu_times=[t], errors={"rmse": e, "frac_off": 0.0, "max_abs": e},
+                            mean_spp=None if adaptive is None else samples / 2)
+
+    res = [result("default", 10.0, 0.1), result("samples=32", 20.0, 0.05, samples=32),
+           result("samples=4", 3.0, 0.3, samples=4),
+           result("adaptive e=0.005 spp<=16", 15.0, 0.04, 0.005), result("adaptive e=0.05 spp<=16", 30.0, 0.2, 0.05)]
+    bench.mark_fronts(res)
+    front = {r.setting.label for r in res if r.front["wall"]}
+    assert front == {"default", "samples=4", "adaptive e=0.005 spp<=16"}
+    assert res[1].front_uniform["wall"] is True and res[3].front_uniform["wall"] is None
+    assert bench.adaptive_on_front(res) == {"wall": ["adaptive e=0.005 spp<=16"], "cpu": ["adaptive e=0.005 spp<=16"]}
+    lines = bench.adaptive_summary(res)
+    assert len(lines) == 2
+    assert "on the Pareto front: adaptive e=0.005 spp<=16" in lines[0] and "samples=32" in lines[0]
+    # without the good adaptive point: none on the front
+    res = [r for r in res if r.setting.label != "adaptive e=0.005 spp<=16"]
+    bench.mark_fronts(res)
+    assert bench.adaptive_on_front(res) == {"wall": [], "cpu": []}
+    assert all("no adaptive setting on the Pareto front" in line for line in bench.adaptive_summary(res))
+    # a sweep without adaptive settings says nothing about them
+    assert bench.adaptive_on_front(res[:3]) is None and bench.adaptive_summary(res[:3]) == []
+    table = bench.scene_table(res, "s")
+    assert "mean spp" in table.splitlines()[2]
+    cells = {c[0]: c for c in ([x.strip() for x in line.split("|")[1:-1]] for line in table.splitlines()[4:])}
+    assert cells["adaptive e=0.05 spp<=16"][3:5] == ["16", "8.00"]     # spp (the budget), mean spp
+    assert cells["samples=32"][3:5] == ["32", "32"]
+
+
+def test_csv_columns_are_documented():
+    """README's Benchmark section lists the CSV columns, in order."""
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text(encoding="utf-8")
+    section = readme.split("\n## Benchmark", 1)[1]
+    m = re.search(r"`results\.csv` \((.*?)\), `results\.md`", section, re.S)
+    assert m, "README: the results.csv paragraph"
+    documented = tuple(re.findall(r"`([a-z_0-9]+)`", m.group(1)))
+    assert documented == bench.CSV_COLUMNS
 
 
 # ---------------------------------------------------------------- end to end
@@ -160,6 +311,17 @@ def test_bench_end_to_end(quick_run):
     assert {r["scene"] for r in rows} == {"default", "bench-opaque"}
     labels = {r["setting"] for r in rows}
     assert {"default", "generic", "schlick"} <= labels
+    adaptive = [r for r in rows if r["adaptive_target"]]
+    assert {r["scene"] for r in adaptive} == {"default", "bench-opaque"}   # one per scene in --quick
+    for r in adaptive:
+        assert r["setting"].startswith("adaptive e=")
+        assert 0.0 < float(r["adaptive_target"]) < 1.0
+        assert 1.0 <= float(r["mean_spp"]) <= int(r["samples"])
+        assert math.isfinite(float(r["rmse"])) and float(r["rmse"]) > 0.0
+        assert r["setting"] in proc.stdout
+    for r in rows:
+        if not r["adaptive_target"]:
+            assert float(r["mean_spp"]) == int(r["samples"])
     for r in rows:
         for col in ("time_ms", "time_min_ms", "time_max_ms", "cpu_ms", "rmse", "frac_off_1_255", "max_abs_err",
                     "min_weight", "scale"):
@@ -187,6 +349,14 @@ def test_bench_end_to_end(quick_run):
     assert info["size"] == "32x18"
     assert set(info["speedup_specialised_vs_generic"]) == {"default", "bench-opaque"}
     assert set(info["default_on_pareto_front"]["default"]) == {"wall", "cpu"}
+    for scene in ("default", "bench-opaque"):
+        on = info["adaptive_on_pareto_front"][scene]
+        assert set(on) == {"wall", "cpu"}
+        sub = {r["setting"]: r for r in rows if r["scene"] == scene}
+        for clock in ("wall", "cpu"):
+            assert on[clock] == [lab for lab, r in sub.items() if r["adaptive_target"] and int(r[f"pareto_{clock}"])]
+    assert proc.stdout.count("adaptive sampling (wall clock)") == 2
+    assert "mean spp" in proc.stdout
     assert "### default" in proc.stdout and "### bench-opaque" in proc.stdout
     assert "specialised vs generic shader" in proc.stdout
     assert len(list(out.glob("ref-*.npy"))) == 2

@@ -3,8 +3,18 @@
 ``glassray bench [SCENE]`` renders each benchmark scene under a set of
 settings (max depth, samples per pixel, min weight, resolution scale, the
 scene-specialised against the generic all-features shader, exact Fresnel
-against Schlick's approximation), times every setting and measures its error
-against a converged float64 reference image:
+against Schlick's approximation, adaptive sampling at a few target errors and
+sample budgets), times every setting and measures its error against a
+converged float64 reference image:
+
+* adaptive settings (``Setting.adaptive`` = the per-pixel target error) render
+  with ``viewer.adaptive.render_adaptive`` with the setting's samples as the
+  mean budget per pixel, same seed as the uniform renders; the time is all
+  of render_adaptive (its passes, its NumPy bookkeeping between them and the
+  read-back), and the samples per pixel it actually used on average
+  (``mean_spp``, at most the budget: pixels below the target stop early) is
+  reported next to the budget.  The Pareto front is one front over uniform
+  and adaptive settings together.
 
 * time: one warm-up render per setting (its image is the one compared), then
   ``--repeat`` timed renders, each finished on the GPU before the clock stops
@@ -38,7 +48,9 @@ against a converged float64 reference image:
 Writes to ``--out`` (default ./bench-results): results.csv, results.md (the
 tables), machine.json (platform, CPU, load, GL renderer, versions, date,
 command, the headline numbers) and pareto.png / pareto-cpu.png (time against
-RMSE, log axes, Pareto front marked, default settings labelled; these need
+RMSE, log axes, Pareto front marked, default settings labelled, adaptive
+settings in their own colour with the front of the uniform settings alone
+drawn dotted for comparison; these need
 matplotlib: ``pip install glassray[bench]``).  The same tables go to stdout.
 """
 
@@ -82,8 +94,8 @@ DEFAULT_ERROR_TOLERANCE = 0.01
 CLOCKS = ("wall", "cpu")
 
 CSV_COLUMNS = ("scene", "setting", "is_default", "pareto_wall", "pareto_cpu", "max_depth", "samples",
-               "min_weight", "scale", "width", "height", "specialise", "fresnel", "time_ms", "time_min_ms",
-               "time_max_ms", "cpu_ms", "repeat", "rmse", "frac_off_1_255", "max_abs_err")
+               "adaptive_target", "mean_spp", "min_weight", "scale", "width", "height", "specialise", "fresnel",
+               "time_ms", "time_min_ms", "time_max_ms", "cpu_ms", "repeat", "rmse", "frac_off_1_255", "max_abs_err")
 
 
 # ---------------------------------------------------------------- settings
@@ -92,7 +104,10 @@ CSV_COLUMNS = ("scene", "setting", "is_default", "pareto_wall", "pareto_cpu", "m
 @dataclass(frozen=True)
 class Setting:
     """One point of the sweep.  ``label`` names what differs from the scene's
-    own settings ("default" for none)."""
+    own settings ("default" for none).  ``adaptive``: None for uniform
+    sampling (``samples`` per pixel everywhere), else the per-pixel target
+    error of adaptive sampling (viewer.adaptive), ``samples`` then being the
+    mean budget per pixel."""
     label: str
     max_depth: int
     samples: int
@@ -100,9 +115,28 @@ class Setting:
     scale: float = 1.0
     specialise: bool = True
     fresnel: str = "exact"
+    adaptive: float | None = None
 
     def key(self) -> tuple:
-        return (self.max_depth, self.samples, self.min_weight, self.scale, self.specialise, self.fresnel)
+        return (self.max_depth, self.samples, self.min_weight, self.scale, self.specialise, self.fresnel,
+                self.adaptive)
+
+
+#: Adaptive points of the full sweep: (target error, budget as a multiple of
+#: the scene's samples).  Measured at 320x180 on default and glass-sphere (16
+#: samples): 0.05 stops early (about 9-11 mean samples at a budget of 16, and
+#: a larger budget changes neither its time nor its error much), 0.02 and
+#: 0.005 spend the whole budget, 0.005 with the lower error; 0.001 gave
+#: nearly the images of 0.005, more slowly.  Budgets 2x and 4x show what the
+#: default target reaches with more samples to spend; the uniform sweep gets
+#: a setting at every adaptive budget, so each has its uniform counterpart.
+ADAPTIVE_SWEEP = ((0.05, 1), (0.02, 1), (0.005, 1), (0.005, 2), (0.005, 4))
+#: --quick: one adaptive point, the default target at the scene's samples.
+QUICK_ADAPTIVE_SWEEP = ((0.005, 1),)
+
+
+def adaptive_label(target: float, samples: int) -> str:
+    return f"adaptive e={target:g} spp<={samples}"
 
 
 def _fmt_w(w: float) -> str:
@@ -124,6 +158,11 @@ def sweep(scene, quick: bool = False, reference_samples: int | None = None) -> l
         if all(s.key() != o.key() for o in out):
             out.append(s)
 
+    def add_adaptive(points) -> None:
+        for target, factor in points:
+            n = r.samples * factor
+            add(replace(base, label=adaptive_label(target, n), samples=n, adaptive=target))
+
     if quick:
         add(replace(base, label="max_depth=2", max_depth=2))
         add(replace(base, label=f"samples={1 if r.samples > 1 else 2}", samples=1 if r.samples > 1 else 2))
@@ -131,11 +170,13 @@ def sweep(scene, quick: bool = False, reference_samples: int | None = None) -> l
         add(replace(base, label="scale=0.5", scale=0.5))
         add(replace(base, label="generic", specialise=False))
         add(replace(base, label="schlick", fresnel="schlick"))
+        add_adaptive(QUICK_ADAPTIVE_SWEEP)
         return out
     for d in (1, 2, 4, 6, 8, 12):
         if d != r.max_depth:
             add(replace(base, label=f"max_depth={d}", max_depth=d))
-    for s in (1, 4, 8, 16, 32):
+    # every adaptive budget as a uniform setting too: a like-for-like comparison
+    for s in sorted({1, 4, 8, 16, 32} | {r.samples * f for _, f in ADAPTIVE_SWEEP}):
         if s != r.samples:
             add(replace(base, label=f"samples={s}", samples=s))
     for w in (0.03, 0.01, 0.001, 0.0001):
@@ -148,6 +189,8 @@ def sweep(scene, quick: bool = False, reference_samples: int | None = None) -> l
     # Combined presets: where several cheap changes together land.
     add(Setting("preset:preview", 4, 1, 0.01, scale=0.5))
     add(Setting("preset:fast", 4, 4, 0.01))
+    # Adaptive sampling: the scene's samples and larger budgets, a few targets.
+    add_adaptive(ADAPTIVE_SWEEP)
     return out
 
 
@@ -326,6 +369,14 @@ class Result:
     cpu_times: list[float] = field(default_factory=list)   # process CPU time, ms
     errors: dict[str, float] = field(default_factory=dict)
     front: dict[str, bool] = field(default_factory=dict)   # on the Pareto front, per clock
+    #: on the front of the uniform settings alone (None for adaptive ones)
+    front_uniform: dict[str, bool | None] = field(default_factory=dict)
+    #: samples per pixel used on average (adaptive: measured; uniform: samples)
+    mean_spp: float | None = None
+
+    @property
+    def spp_used(self) -> float:
+        return float(self.setting.samples) if self.mean_spp is None else self.mean_spp
 
     @property
     def time_ms(self) -> float:
@@ -371,13 +422,26 @@ class _Renderers:
         self._by_variant.clear()
 
 
-def _timed_render(renderer, w: int, h: int, samples: int) -> tuple[float, float]:
-    """(wall ms, process CPU ms) of one render, finished on the GPU."""
+def _render_setting(renderer, setting: Setting, w: int, h: int) -> tuple[np.ndarray, float | None]:
+    """One render of a setting at (w, h): the image (H, W, 3) and, for an
+    adaptive setting, the mean samples per pixel it used (None: uniform)."""
+    if setting.adaptive is None:
+        return renderer.render(w, h, setting.samples, RENDER_SEED), None
+    from .adaptive import render_adaptive
+
+    res = render_adaptive(renderer, w, h, setting.samples, setting.adaptive, seed=RENDER_SEED)
+    return res.image, res.mean_spp
+
+
+def _timed_render(renderer, setting: Setting, w: int, h: int) -> tuple[float, float]:
+    """(wall ms, process CPU ms) of one render, finished on the GPU: all of
+    Renderer.render, or all of render_adaptive (every pass and the NumPy
+    work between them)."""
     ctx = renderer.ctx
     ctx.finish()
     c0 = time.process_time()
     t0 = time.perf_counter()
-    renderer.render(w, h, samples, RENDER_SEED)   # the read-back waits for the GPU
+    _render_setting(renderer, setting, w, h)   # the read-back waits for the GPU
     ctx.finish()
     return (time.perf_counter() - t0) * 1000.0, (time.process_time() - c0) * 1000.0
 
@@ -385,18 +449,20 @@ def _timed_render(renderer, w: int, h: int, samples: int) -> tuple[float, float]
 def bench_scene(ctx, scene, stem: str, settings: list[Setting], width: int, height: int, repeat: int,
                 reference: np.ndarray, log=None, time_tol: float = DEFAULT_TIME_TOLERANCE,
                 error_tol: float = DEFAULT_ERROR_TOLERANCE) -> list[Result]:
-    """Warm-up render (the image compared with the reference) of every
-    setting, then ``repeat`` interleaved rounds of timed renders."""
+    """Warm-up render (the image compared with the reference; for adaptive
+    settings also the mean samples per pixel used, which is deterministic
+    for the seed) of every setting, then ``repeat`` interleaved rounds of
+    timed renders."""
     pool = _Renderers(ctx)
     results: list[Result] = []
     try:
         for st in settings:
             w, h = render_size(st, width, height)
             r = pool.get(scene, st)
-            img = r.render(w, h, st.samples, RENDER_SEED)
+            img, mean_spp = _render_setting(r, st, w, h)
             if (w, h) != (width, height):
                 img = upscale(img, width, height)
-            res = Result(stem, st, w, h, errors=image_errors(img, reference))
+            res = Result(stem, st, w, h, errors=image_errors(img, reference), mean_spp=mean_spp)
             results.append(res)
         for k in range(repeat):
             # alternate the order between rounds so no setting always runs right after another
@@ -404,7 +470,7 @@ def bench_scene(ctx, scene, stem: str, settings: list[Setting], width: int, heig
             for res in order:
                 st = res.setting
                 r = pool.get(scene, st)
-                wall, cpu = _timed_render(r, res.width, res.height, st.samples)
+                wall, cpu = _timed_render(r, st, res.width, res.height)
                 res.times.append(wall)
                 res.cpu_times.append(cpu)
             if log is not None:
@@ -417,12 +483,22 @@ def bench_scene(ctx, scene, stem: str, settings: list[Setting], width: int, heig
 
 def mark_fronts(results: list[Result], time_tol: float = DEFAULT_TIME_TOLERANCE,
                 error_tol: float = DEFAULT_ERROR_TOLERANCE) -> None:
-    """Set each result's Pareto membership for both clocks (time against RMSE)."""
+    """Set each result's Pareto membership for both clocks (time against
+    RMSE): over all settings (``front``: the front), and over the uniform
+    settings alone (``front_uniform``: where the front would be without
+    adaptive sampling; None for the adaptive settings)."""
+    uniform = [r for r in results if r.setting.adaptive is None]
     for clock in CLOCKS:
         mask = pareto_mask([r.t(clock) for r in results], [r.errors["rmse"] for r in results],
                            time_tol, error_tol)
         for res, m in zip(results, mask):
             res.front[clock] = m
+        mask = pareto_mask([r.t(clock) for r in uniform], [r.errors["rmse"] for r in uniform],
+                           time_tol, error_tol)
+        for res in results:
+            res.front_uniform[clock] = None
+        for res, m in zip(uniform, mask):
+            res.front_uniform[clock] = m
 
 
 # ---------------------------------------------------------------- machine
@@ -478,6 +554,8 @@ def _row(res: Result) -> dict:
     return {"scene": res.scene, "setting": st.label, "is_default": int(st.label == "default"),
             "pareto_wall": int(res.front["wall"]), "pareto_cpu": int(res.front["cpu"]),
             "max_depth": st.max_depth, "samples": st.samples,
+            "adaptive_target": "" if st.adaptive is None else f"{st.adaptive:g}",
+            "mean_spp": f"{res.spp_used:.4f}" if st.adaptive is not None else str(st.samples),
             "min_weight": _fmt_w(st.min_weight), "scale": f"{st.scale:g}", "width": res.width,
             "height": res.height, "specialise": int(st.specialise), "fresnel": st.fresnel,
             "time_ms": f"{res.time_ms:.4f}", "time_min_ms": f"{min(res.times):.4f}",
@@ -505,13 +583,16 @@ def speedup(results: list[Result], a: str = "generic", b: str = "default", clock
 
 
 def scene_table(results: list[Result], title: str, clock: str = "wall") -> str:
-    """A Markdown table (also readable as plain text), fastest first on ``clock``."""
-    head = ("setting", "size", "depth", "spp", "min_w", "shader", "fresnel", "ms (median)", "min..max",
-            "CPU ms", "RMSE", ">1/255", "max err", "front")
+    """A Markdown table (also readable as plain text), fastest first on
+    ``clock``.  "spp" is the samples per pixel (for an adaptive setting the
+    mean budget), "mean spp" what was used on average."""
+    head = ("setting", "size", "depth", "spp", "mean spp", "min_w", "shader", "fresnel", "ms (median)",
+            "min..max", "CPU ms", "RMSE", ">1/255", "max err", "front")
     rows = []
     for res in sorted(results, key=lambda r: r.t(clock)):
         st = res.setting
         rows.append((st.label, f"{res.width}x{res.height}", str(st.max_depth), str(st.samples),
+                     str(st.samples) if st.adaptive is None else f"{res.spp_used:.2f}",
                      _fmt_w(st.min_weight), "spec" if st.specialise else "generic", st.fresnel,
                      f"{res.time_ms:.1f}", f"{min(res.times):.0f}..{max(res.times):.0f}", f"{res.cpu_ms:.0f}",
                      f"{res.errors['rmse']:.2e}", f"{100 * res.errors['frac_off']:.2f}%",
@@ -519,7 +600,7 @@ def scene_table(results: list[Result], title: str, clock: str = "wall") -> str:
                      "**" if res.front["wall"] and res.front["cpu"] else ("w" if res.front["wall"] else
                                                                             ("c" if res.front["cpu"] else ""))))
     widths = [max(len(h), *(len(r[i]) for r in rows)) for i, h in enumerate(head)]
-    right = {2, 3, 4, 7, 8, 9, 10, 11, 12}
+    right = {2, 3, 4, 5, 8, 9, 10, 11, 12, 13}
 
     def line(cells):
         return "| " + " | ".join(c.rjust(wd) if i in right else c.ljust(wd)
@@ -549,14 +630,53 @@ def scene_summary(results: list[Result], time_tol: float = DEFAULT_TIME_TOLERANC
                         dominates(r.t(clock), r.errors["rmse"], default.t(clock), default.errors["rmse"],
                                   time_tol, error_tol)]
                 out.append(f"default settings: NOT on the Pareto front ({name}; dominated by {', '.join(doms)})")
+    out.extend(adaptive_summary(results))
     return out
+
+
+def adaptive_on_front(results: list[Result]) -> dict[str, list[str]] | None:
+    """Per clock, the adaptive settings on the Pareto front (of all settings
+    together); None when the sweep had no adaptive setting."""
+    if not any(r.setting.adaptive is not None for r in results):
+        return None
+    return {clock: [r.setting.label for r in results if r.setting.adaptive is not None and r.front[clock]]
+            for clock in CLOCKS}
+
+
+def adaptive_summary(results: list[Result]) -> list[str]:
+    """Whether adaptive sampling moves the front, per clock: the adaptive
+    settings on it, and the uniform settings that were on the front of the
+    uniform settings alone and that adaptive ones push off it."""
+    on = adaptive_on_front(results)
+    if on is None:
+        return []
+    out = []
+    for clock, name in (("wall", "wall clock"), ("cpu", "CPU time")):
+        if not on[clock]:
+            out.append(f"adaptive sampling ({name}): no adaptive setting on the Pareto front")
+            continue
+        pushed = [r.setting.label for r in results if r.front_uniform.get(clock) and not r.front[clock]]
+        out.append(f"adaptive sampling ({name}): on the Pareto front: {', '.join(on[clock])}"
+                   + (f"; pushes off the front of the uniform settings: {', '.join(pushed)}" if pushed else
+                      "; every point of the uniform settings' front stays on it"))
+    return out
+
+
+def _group(setting: Setting) -> str:
+    """The plot's group of a setting: "adaptive", or its label's knob."""
+    if setting.adaptive is not None:
+        return "adaptive"
+    return setting.label.split("=")[0].split(":")[0]
 
 
 def plot(path: Path, by_scene: dict[str, list[Result]], titles: dict[str, str], subtitle: str,
          clock: str = "wall") -> bool:
     """pareto.png: per scene, median frame time against RMSE (log axes), the
-    Pareto front as a staircase, the default settings labelled.  False when
-    matplotlib is missing."""
+    Pareto front (of all settings) as a staircase, the default settings
+    labelled; adaptive settings in their own colour and marker, and, when
+    there are any, the front of the uniform settings alone as a dotted
+    staircase (where the front would be without adaptive sampling).  False
+    when matplotlib is missing."""
     try:
         import matplotlib
 
@@ -571,26 +691,36 @@ def plot(path: Path, by_scene: dict[str, list[Result]], titles: dict[str, str], 
     groups = (("default", "default", "#d62728", "*", 180), ("max_depth", "max depth", "#1f77b4", "o", 36),
               ("samples", "samples", "#2ca02c", "s", 36), ("min_weight", "min weight", "#9467bd", "^", 40),
               ("scale", "resolution scale", "#8c564b", "D", 32), ("generic", "generic shader", "#ff7f0e", "X", 60),
-              ("schlick", "Schlick Fresnel", "#e377c2", "P", 60), ("preset", "combined preset", "#7f7f7f", "v", 40))
+              ("schlick", "Schlick Fresnel", "#e377c2", "P", 60), ("preset", "combined preset", "#7f7f7f", "v", 40),
+              ("adaptive", "adaptive (e target \u2264 mean budget)", "#17becf", "h", 70))
     for ax, (stem, results) in zip(axes.flat, by_scene.items()):
         floor = min((r.errors["rmse"] for r in results if r.errors["rmse"] > 0), default=1e-6) / 2
         err = lambda r: max(r.errors["rmse"], floor)  # noqa: E731 - log axes need > 0
         for prefix, name, colour, marker, size in groups:
-            pts = [r for r in results if r.setting.label.split("=")[0].split(":")[0] == prefix]
+            pts = [r for r in results if _group(r.setting) == prefix]
             if pts:
                 ax.scatter([r.t(clock) for r in pts], [err(r) for r in pts], c=colour, marker=marker, s=size,
-                           label=name, zorder=3, edgecolors="black" if prefix == "default" else "none",
+                           label=name, zorder=3, edgecolors="black" if prefix in ("default", "adaptive") else "none",
                            linewidths=0.6)
-        front = sorted((r for r in results if r.front[clock]), key=lambda r: (r.t(clock), err(r)))
-        if front:
+
+        def staircase(points):
             xs, ys = [], []
-            for r in front:
+            for r in sorted(points, key=lambda r: (r.t(clock), err(r))):
                 if xs:
                     xs.append(r.t(clock))
                     ys.append(ys[-1])
                 xs.append(r.t(clock))
                 ys.append(err(r))
-            ax.plot(xs, ys, color="black", lw=1.0, ls="--", zorder=2, label="Pareto front")
+            return xs, ys
+
+        front = [r for r in results if r.front[clock]]
+        if any(r.setting.adaptive is not None for r in results):
+            uniform_front = [r for r in results if r.front_uniform.get(clock)]
+            if uniform_front:
+                ax.plot(*staircase(uniform_front), color="#7f7f7f", lw=1.0, ls=":", zorder=1,
+                        label="front of uniform settings only")
+        if front:
+            ax.plot(*staircase(front), color="black", lw=1.0, ls="--", zorder=2, label="Pareto front")
             ax.scatter([r.t(clock) for r in front], [err(r) for r in front], s=110, facecolors="none",
                        edgecolors="black", linewidths=1.0, zorder=4)
         # Labels: the default settings always (with an arrow), then the front,
@@ -615,8 +745,11 @@ def plot(path: Path, by_scene: dict[str, list[Result]], titles: dict[str, str], 
             if any(abs(x - px) < 0.07 and abs(y - py) < 0.045 for px, py in placed):
                 continue
             placed.append((x, y))
-            short = lab.replace("max_depth=", "d").replace("samples=", "spp ").replace("min_weight=", "w ") \
-                       .replace("scale=", "x").replace("preset:", "")
+            if r.setting.adaptive is not None:
+                short = f"e{r.setting.adaptive:g} \u2264{r.setting.samples}"
+            else:
+                short = lab.replace("max_depth=", "d").replace("samples=", "spp ").replace("min_weight=", "w ") \
+                           .replace("scale=", "x").replace("preset:", "")
             ax.annotate(short, (r.t(clock), err(r)), textcoords="offset points", xytext=(4, 3), fontsize=6.5,
                         color="#333333")
         ax.set_xscale("log")
@@ -633,7 +766,7 @@ def plot(path: Path, by_scene: dict[str, list[Result]], titles: dict[str, str], 
     for ax in list(axes.flat)[1:n]:
         for h, lab in zip(*ax.get_legend_handles_labels()):
             seen.setdefault(lab, h)
-    fig.legend(list(seen.values()), list(seen.keys()), loc="lower center", ncol=min(5, len(seen)),
+    fig.legend(list(seen.values()), list(seen.keys()), loc="lower center", ncol=min(4, len(seen)),
                fontsize=8, frameon=False)
     import textwrap
 
@@ -687,7 +820,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--reference-samples", type=_positive(65536), default=None, metavar="N",
                    help=f"samples per pixel of the reference ({DEFAULT_REFERENCE_SAMPLES}; "
                         f"{QUICK_REFERENCE_SAMPLES} with --quick)")
-    p.add_argument("--quick", action="store_true", help="a tiny sweep (seven settings per scene), for tests")
+    p.add_argument("--quick", action="store_true",
+                   help="a tiny sweep (eight settings per scene, one of them adaptive), for tests")
     p.add_argument("--out", default="bench-results", metavar="DIR",
                    help="folder for results.csv, results.md, machine.json, pareto.png and the cached "
                         "reference images (./bench-results)")
@@ -855,6 +989,7 @@ def _run(args, ctx, backend, scenes, width, height, ref_samples, out: Path) -> i
     info["default_on_pareto_front"] = {
         stem: next((dict(r.front) for r in res if r.setting.label == "default"), None)
         for stem, res in by_scene.items()}
+    info["adaptive_on_pareto_front"] = {stem: adaptive_on_front(res) for stem, res in by_scene.items()}
 
     from .scene import write_atomic
 
