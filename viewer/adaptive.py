@@ -11,8 +11,9 @@ picture inside glass); a flat region is exact with one centred sample.  So:
    changes across it (another object, a normal turned by more than
    NORMAL_ANGLE_DEG, a relative depth jump over DEPTH_JUMP), or the camera
    rays of neighbours land on a checker more than half a check apart (where
-   centre samples alias into flat-looking patches); the flags are dilated by
-   one pixel (a thin feature between two centres).  Every other pixel ends
+   centre samples alias into flat-looking patches; these two count as an
+   error of EDGE_ERROR, so a larger target ignores them); the flags are
+   dilated by one pixel (a thin feature between two centres).  Every other pixel ends
    with one sample.
 2. Flagged pixels get FIRST_ROUND samples.  Then, round after round, a
    pixel's error is estimated from its own samples (the difference of its
@@ -65,6 +66,9 @@ SLIVER = 0.1
 #: above this (or above the target error, whichever is larger).
 FLAG_CONTRAST = 0.02
 FLAG_DILATE = True
+#: The error assumed of a pixel flagged by a first-hit edge or checker
+#: aliasing alone (its colour contrast may not show it).
+EDGE_ERROR = 0.1
 #: A pixel's error is at least this share of its worst neighbour's.
 NEIGHBOUR_SHARE = 0.25
 #: Share of the budget left that one round may spend (the rest waits for
@@ -510,8 +514,12 @@ class AdaptiveRender:
         contrast = colour_contrast(sums.mean)
         self._contrast = contrast.astype(np.float32)
         self._own = (SLIVER * self._contrast).astype(np.float32)   # one sample: no spread known yet
-        flagged = ((contrast > max(self.target_error, FLAG_CONTRAST)) | first_hit_edges(t, obj, normal)
-                   | checker_aliasing(renderer.scene, t, obj))
+        flagged = contrast > max(self.target_error, FLAG_CONTRAST)
+        # An edge of the first interaction or an aliasing checker counts as
+        # an error of EDGE_ERROR until the pixel's samples say otherwise: a
+        # target above it leaves such pixels alone.
+        if self.target_error < EDGE_ERROR:
+            flagged |= first_hit_edges(t, obj, normal) | checker_aliasing(renderer.scene, t, obj)
         if FLAG_DILATE:
             flagged = _neighbourhood(flagged, np.maximum)
         # Every flagged pixel first goes to FIRST_ROUND samples (a spread
