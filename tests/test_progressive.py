@@ -130,3 +130,207 @@ def test_scene_changes_restart_the_accumulation(setup):
     assert p.passes_done == 0 and not p.image().any()
     p.finish_pass()
     assert np.array_equal(p.image(), r.render(20, 12, 1))
+
+
+# ---------------------------------------------------------------- adaptive accumulation
+
+#: A plain floor (no checker) and a matte ball, seen from above, under a
+#: constant sky, lit from the camera (its shadow hides behind it):
+#: everything away from the ball's outline is flat.
+FLAT = {
+    "camera": {"position": [0.0, 4.0, 2.5], "target": [0.0, 0.0, 0.0], "fov": 50},
+    "render": {"samples": 8, "max_depth": 3},
+    "sky": {"type": "color", "color": [0.5, 0.6, 0.8]},
+    "lights": [{"position": [0.0, 4.0, 2.5]}],
+    "materials": {"floor": {"color": [0.6, 0.6, 0.6]}, "red": {"color": [0.9, 0.2, 0.1], "specular": 0}},
+    "objects": [{"type": "plane", "material": "floor"},
+                {"type": "sphere", "center": [0.0, 0.4, 0], "radius": 0.4, "material": "red"}],
+}
+
+
+def accum_mean(p: Progressive) -> tuple[np.ndarray, np.ndarray]:
+    """What the display pass divides: accum_tex read back, top row first,
+    as (sum / count, count)."""
+    w, h = p.size
+    acc = np.frombuffer(p.accum_tex.read(), np.float32).reshape(h, w, 4)[::-1]
+    count = acc[..., 3]
+    return acc[..., :3] / np.maximum(count, 1)[..., None], count
+
+
+def run_adaptive(p: Progressive, budget_ms: float = 1e-3, limit: int = 10000) -> list[float]:
+    """Accumulate until done with a budget so small that every call takes
+    exactly one step; return mean_spp after each call."""
+    means = []
+    while not p.done:
+        assert len(means) < limit
+        p.accumulate(budget_ms=budget_ms)
+        means.append(p.mean_spp)
+    return means
+
+
+@pytest.fixture
+def adaptive_setup(gl):
+    scene = make_scene(DOC, "adaptive")
+    r = Renderer(gl, scene)
+    p = Progressive(gl, r, adaptive=True, seed=3)
+    yield gl, scene, r, p
+    p.release()
+    r.release()
+
+
+def test_adaptive_accumulation_equals_the_offscreen_adaptive_render(adaptive_setup):
+    from viewer.adaptive import render_adaptive
+
+    gl, scene, r, p = adaptive_setup
+    w, h = 61, 37
+    scene.render.samples = 6
+    r.set_scene(scene)
+    p.resize(w, h)
+    assert p.adaptive and not p.done and p.mean_spp == 0.0
+    means = run_adaptive(p)
+    job = p.job
+    assert len(means) == job.draws_done + 1 > 3  # one draw call per accumulate(), then the end
+    expected = render_adaptive(r, w, h, 6, seed=3)
+    assert np.array_equal(job.spp, expected.spp)
+    assert expected.spp.max() > 6 and expected.spp.min() == 1  # really adaptive
+    np.testing.assert_allclose(p.image(), expected.image, rtol=1e-6, atol=1e-7)
+    # what the display pass shows: the same sums, uploaded rows bottom first
+    mean, count = accum_mean(p)
+    assert np.array_equal(count, expected.spp)
+    np.testing.assert_allclose(mean, expected.image, rtol=1e-5, atol=1e-6)
+    out = gl.simple_framebuffer((w, h), components=4)
+    p.display(out, (0, 0, w, h))
+    shown = np.frombuffer(out.read(components=3), np.uint8).reshape(h, w, 3)[::-1]
+    out.release()
+    assert np.abs(shown.astype(int) - to_display8(expected.image).astype(int)).max() <= 1
+    assert p.accumulate() == 0.0  # done: no more work
+    # another seed is another picture: the seed really reaches the render
+    other = render_adaptive(r, w, h, 6, seed=4)
+    assert not np.array_equal(other.image, p.image())
+
+
+def test_mean_spp_grows_to_at_most_samples_and_flat_regions_keep_one(gl):
+    scene = make_scene(FLAT, "flat")
+    r = Renderer(gl, scene)
+    p = Progressive(gl, r, adaptive=True)
+    try:
+        w, h = 64, 36
+        p.resize(w, h)
+        means = run_adaptive(p)
+        assert means[0] == 0.0  # the first pass is one draw, still in flight
+        assert all(b >= a for a, b in zip(means, means[1:]))
+        assert 1 in means and 1.0 < means[-1] <= 8
+        assert means[-1] == pytest.approx(p.job.spp.mean())
+        spp = p.job.spp
+        # flat: farther than 2 px from every pixel whose camera ray hits the ball
+        _, obj, _ = r.first_hits(w, h)
+        ball = np.pad(obj == 1, 2)
+        near = np.zeros((h, w), bool)
+        for dy in range(5):
+            for dx in range(5):
+                near |= ball[dy:dy + h, dx:dx + w]
+        assert near.sum() < 0.2 * w * h
+        assert (spp[~near] == 1).all()
+        # the ball's outline got more than the mean
+        edge = near & ~(obj == 1)
+        assert spp[edge].max() > 8
+    finally:
+        p.release()
+        r.release()
+
+
+def _gl_counts(gl) -> dict[str, int]:
+    """GL objects of each kind in the current (EGL) context: glIs* over the
+    names up to a little past the newest one."""
+    import ctypes
+
+    egl = ctypes.CDLL("libEGL.so.1")
+    egl.eglGetProcAddress.restype = ctypes.c_void_p
+    egl.eglGetProcAddress.argtypes = [ctypes.c_char_p]
+    proto = ctypes.CFUNCTYPE(ctypes.c_ubyte, ctypes.c_uint)
+    probes = [gl.buffer(reserve=4), gl.texture((1, 1), 4)]
+    probes.append(gl.framebuffer(color_attachments=[probes[1]]))
+    upper = max(p.glo for p in probes) + 1024
+    counts = {}
+    try:
+        for kind in ("Buffer", "Texture", "Framebuffer", "VertexArray", "Program", "Renderbuffer"):
+            addr = egl.eglGetProcAddress(f"glIs{kind}".encode())
+            if not addr:
+                pytest.skip("no glIs* through eglGetProcAddress")
+            fn = proto(addr)
+            counts[kind] = sum(1 for name in range(1, upper) if fn(name))
+    finally:
+        for obj in reversed(probes):
+            obj.release()
+    return counts
+
+
+def test_a_restart_releases_the_adaptive_render_and_starts_over(adaptive_setup):
+    from viewer.adaptive import render_adaptive
+
+    gl, scene, r, p = adaptive_setup
+    w, h = 40, 24
+    scene.render.samples = 16  # rounds enough to stop in
+    r.set_scene(scene)
+    p.resize(w, h)
+    run_adaptive(p)  # compiles the adaptive shader variants (kept by the renderer)
+    p.restart()
+    base = _gl_counts(gl)
+    for steps in (1, 2, 3, 1, 2, 3):
+        # 1 step: the first pass in flight (its own targets); more: pixel lists
+        for _ in range(steps):
+            p.accumulate(budget_ms=1e-3)
+        assert p.job is not None and not p.done
+        old = p.job
+        scene.camera.position = (0.1 * steps, 1.5, 4.0)  # the camera moved
+        r.set_scene(scene)
+        p.restart()
+        assert p.job is None and old.done and p.mean_spp == 0.0 and not p.started
+        assert old.sampler._list_tex is None and not old.sampler._vaos
+        assert _gl_counts(gl) == base  # nothing of the old render is left
+    assert p._uploaded_spent == 0 and not accum_mean(p)[1].any()
+    # the new view from the start: the offscreen adaptive render of the new camera
+    run_adaptive(p)
+    expected = render_adaptive(r, w, h, seed=3)
+    assert np.array_equal(p.job.spp, expected.spp)
+    np.testing.assert_allclose(p.image(), expected.image, rtol=1e-6, atol=1e-7)
+    # a finished render gives its GL objects back at once (the idle viewer keeps its sums only)
+    assert _gl_counts(gl) == base
+    # a resize starts over too, at the new size
+    p.accumulate(budget_ms=1e-3)
+    p.resize(30, 20)
+    assert p.job is None and not p.done
+    run_adaptive(p)
+    assert p.job.spp.shape == (20, 30)
+
+
+def test_adaptive_screenshot_and_switching_modes(adaptive_setup):
+    gl, scene, r, p = adaptive_setup
+    w, h = 40, 24
+    scene.render.samples = 16
+    r.set_scene(scene)
+    p.resize(w, h)
+    # P before anything is traced: the first sample of every pixel (the centre)
+    p.finish_pass()
+    assert p.has_full_sample and p.mean_spp == 1.0 and not p.done
+    one = r.render(w, h, 1)
+    assert np.array_equal(p.image(), one)
+    assert np.array_equal(accum_mean(p)[1], np.ones((h, w)))
+    # a screenshot mid-way is the mean so far, the same as what is shown
+    while p.mean_spp == 1.0:
+        p.accumulate(budget_ms=1e-3)
+    assert not p.done
+    mean, count = accum_mean(p)
+    assert count.max() > 1
+    np.testing.assert_allclose(p.image(), mean, rtol=1e-5, atol=1e-6)
+    assert not np.array_equal(p.image(), one)
+    p.finish_pass()  # nothing to do: every pixel has a sample
+    assert p.mean_spp == pytest.approx(count.mean())
+    # switched off: uniform passes from the start, as before
+    p.adaptive = False
+    assert p.job is None and p.passes_done == 0 and not p.image().any()
+    while not p.done:
+        p.accumulate(1000.0)
+    assert p.mean_spp == 16 and np.array_equal(p.image(), r.render(w, h, 16, seed=3))
+    p.adaptive = True
+    assert not p.done and p.mean_spp == 0.0

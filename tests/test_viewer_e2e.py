@@ -492,11 +492,17 @@ def test_viewer_runs_without_imgui(xdisplay, tmp_path):
     """imgui-bundle missing: no panel, the viewer says so and still works."""
     scene_file = tmp_path / "e2e.toml"
     scene_file.write_text(SCENE)
-    v = Viewer(xdisplay, tmp_path, str(scene_file), "--size", "160x90", "--no-vsync",
+    v = Viewer(xdisplay, tmp_path, str(scene_file), "--size", "160x90", "--no-vsync", "--adaptive",
                env={"GLASSRAY_NO_IMGUI": "1"})
     try:
         img = v.shot()
         assert img.shape == (90, 160, 3)
+        # with --adaptive the HUD (here the title) gives the mean samples per pixel
+        hud = "samples 1.0/1 mean per pixel (adaptive)"
+        deadline = time.monotonic() + 20
+        while hud not in v.xdo("getwindowname", v.wid) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert hud in v.xdo("getwindowname", v.wid)
         v.key("v")
         deadline = time.monotonic() + 20
         while "view: cost" not in v.xdo("getwindowname", v.wid) and time.monotonic() < deadline:

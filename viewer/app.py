@@ -4,8 +4,10 @@ It opens the window (OpenGL 3.3 core or newer), turns GLFW's events into
 calls on :class:`viewer.controls.Controls`, runs the loop and draws with the
 shared renderer through :class:`viewer.progressive.Progressive` (previews at
 a reduced resolution while something moves, accumulation at full
-resolution when it stops, nothing at all once the scene's ``samples`` are
-reached: the loop then sleeps in ``glfw.wait_events``).  The settings panel,
+resolution when it stops -- with `--adaptive` (or the panel) only the pixels
+that still need samples get more after the first full sample -- and nothing at
+all once the scene's ``samples`` are reached: the loop then sleeps in
+``glfw.wait_events``).  The settings panel,
 the HUD and the help overlay are Dear ImGui (imgui-bundle) widgets from
 viewer/ui.py; without imgui-bundle the viewer still runs, with the HUD in
 the window title and the help on stdout.
@@ -179,7 +181,11 @@ class Viewer:
         self.file_scene = copy.deepcopy(scene)  # as loaded: F5 takes what changed on disk since
         self.good_scene = copy.deepcopy(scene)  # the last scene the renderer accepted
         self.renderer = Renderer(self.ctx, scene)
-        self.prog = Progressive(self.ctx, self.renderer, DEFAULT_TARGET_MS)
+        # adaptive accumulation with `view --adaptive` or the panel's "adaptive"
+        # checkbox; off by default: measured on llvmpipe, uniform passes reach
+        # a given error sooner (README, "Adaptive anti-aliasing")
+        self.prog = Progressive(self.ctx, self.renderer, DEFAULT_TARGET_MS,
+                                adaptive=bool(getattr(self.args, "adaptive", False)))
         self.controls = Controls(scene, glfw.get_window_size(win))
 
         self.show_panel = False
@@ -241,6 +247,7 @@ class Viewer:
             self._addr = addr
             self._imgui_ready = True
             self.panel = Panel(self.scene, DEFAULT_TARGET_MS)
+            self.panel.adaptive = self.prog.adaptive
         except Exception as e:
             global IMGUI_ERROR
             IMGUI_ERROR = f"{type(e).__name__}: {e}"
@@ -356,11 +363,19 @@ class Viewer:
             if self.soak:
                 self._soak_step()
                 if self.frames == warm:
+                    # an adaptive render in flight holds a few GL objects of
+                    # its own: counted with none in flight, at both ends; and
+                    # its shader variants (cached per scene features) are
+                    # compiled by now, even those its first rounds have not
+                    # needed yet (with samples 1 it traces no pixel lists)
+                    self.prog.restart()
+                    self.prog.compile_adaptive()
                     gl_start, rss_start = gl_object_counts(self.ctx, self.prog), _rss_kb()
                 if self.frames >= self.soak:
                     break
             self._frame()
         if self.soak:
+            self.prog.restart()
             self.ctx.finish()
             gl_end, rss_end = gl_object_counts(self.ctx, self.prog), _rss_kb()
             moving = sorted(self._preview_frames) or [0.0]
@@ -483,6 +498,8 @@ class Viewer:
                     self.controls.changed = True
                 if res.target_ms_changed:
                     self.prog.target_ms = self.panel.target_ms
+                if res.adaptive_changed:
+                    self._set_adaptive(self.panel.adaptive)
 
         if self.controls.take_changed():
             self._apply_scene()
@@ -505,13 +522,19 @@ class Viewer:
             traced = previewed = True
             show_trace = True
         elif not self.prog.done and (self.soak or t0 - self.last_change >= SETTLE_S) and self.quality_job is None:
-            passes = self.prog.passes_done
-            self.prog.accumulate(self.prog.target_ms)
+            landed = (self.prog.passes_done, self.prog.uploads)
+            try:
+                self.prog.accumulate(self.prog.target_ms)
+            except Exception as e:  # an adaptive shader variant that does not compile
+                if not self.prog.adaptive:
+                    raise
+                self._set_adaptive(False)
+                self._error(f"adaptive accumulation failed, accumulating uniformly: {e}")
             traced = True
             # progress is shown a few times a second (the display pass and the
             # buffer swap are not free on a software renderer), and at once
-            # when a sample completes
-            show_trace = (self.prog.passes_done != passes or self.soak
+            # when a sample completes (adaptive: when new sums land)
+            show_trace = ((self.prog.passes_done, self.prog.uploads) != landed or self.soak
                           or t0 - self._last_display >= ACCUMULATE_DISPLAY_S)
         else:
             show_trace = False
@@ -568,10 +591,16 @@ class Viewer:
                     f"max depth {self.scene.render.max_depth}", *q]
         rw, rh = self.prog.active_resolution
         preview = (rw, rh) != self.prog.size
-        done, total = self.prog.passes_done, self.prog.samples
+        total = self.prog.samples
+        if self.prog.adaptive:
+            samples = (f"samples {self.prog.mean_spp:.1f}/{total} mean per pixel (adaptive)"
+                       + ("" if self.prog.done else " ..."))
+        else:
+            done = self.prog.passes_done
+            samples = f"samples {done}/{total}" + ("" if done >= total else " ...")
         return [f"{self.frame_ms:.1f} ms  {self.fps:.0f} fps",
                 f"{rw}x{rh}" + (" (preview)" if preview else ""),
-                f"samples {done}/{total}" + ("" if done >= total else " ..."),
+                samples,
                 f"max depth {self.scene.render.max_depth}", *q]
 
     def _draw_overlays(self) -> None:
@@ -598,7 +627,7 @@ class Viewer:
         self.debug_dirty = True
         self.needs_display = True
         if self.controls.view == "image":
-            self.need_preview = self.prog.passes_done == 0 and self.prog.next_row == 0
+            self.need_preview = not self.prog.started
         self._say(f"view: {self.controls.view}")
 
     def _debug_frame(self, t0: float, fbw: int, fbh: int, force_full: bool = False) -> bool:
@@ -743,6 +772,14 @@ class Viewer:
             self.controls.changed = False
             self.renderer.set_scene(self.scene)
         self.prog.restart()
+
+    def _set_adaptive(self, on: bool) -> None:
+        """Adaptive or uniform accumulation (the panel's "adaptive"): starts over."""
+        if self.prog.adaptive != bool(on):
+            self.prog.adaptive = on
+            self.needs_display = True
+        if self.panel is not None:
+            self.panel.adaptive = self.prog.adaptive
 
     def _error(self, text: str) -> None:
         self._say(text.splitlines()[0] if text else text, error=False)

@@ -123,6 +123,9 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("scene", nargs="?", metavar="SCENE", help="scene file or built-in scene name")
     v.add_argument("--size", type=_size, default=(1280, 720), metavar="WxH", help="window size (1280x720)")
     v.add_argument("--vsync", action=argparse.BooleanOptionalAction, default=True, help="sync to the display")
+    v.add_argument("--adaptive", action=argparse.BooleanOptionalAction, default=False,
+                   help="once the view is still, add samples only where pixels still need them (off: on "
+                        "llvmpipe uniform passes reach a given error sooner; the panel switches it too)")
     # hidden: `make run` checks that a window can be opened; the soak test drives N frames
     v.add_argument("--probe", action="store_true", help=argparse.SUPPRESS)
     v.add_argument("--soak", type=_int_range(1, 10**7), default=0, metavar="N", help=argparse.SUPPRESS)
@@ -267,6 +270,10 @@ def cmd_render(args) -> int:
     if not os.access(parent, os.W_OK):
         raise Failure(f"{args.output}: cannot write: folder {parent} is not writable")
 
+    adaptive = _adaptive(args)
+    if args.view == "samples" and not adaptive:      # bad usage: before any OpenGL
+        raise UsageError("--view samples shows an adaptive render's samples per pixel; drop --no-adaptive")
+
     from .context import ContextError, create_offscreen_context
     from .renderer import Renderer
 
@@ -284,10 +291,11 @@ def cmd_render(args) -> int:
             ctx.release()
             raise
     samples = scene.render.samples
-    renderer = Renderer(ctx, scene)
-    adaptive = _adaptive(args)
-    if args.view == "samples" and not adaptive:
-        raise UsageError("--view samples shows an adaptive render's samples per pixel; drop --no-adaptive")
+    try:
+        renderer = Renderer(ctx, scene)
+    except BaseException:
+        ctx.release()
+        raise
     try:
         if adaptive:
             from .adaptive import DEFAULT_TARGET_ERROR, render_adaptive

@@ -10,6 +10,14 @@ framebuffers and shows the result in whatever framebuffer it is given.
   time budget, so one slow sample never blocks the event loop; sample k uses
   offset k of ``sample_offsets(samples, seed)``, the same pattern as
   ``glassray render``, so a finished accumulation equals the offscreen image.
+* Adaptive accumulation (``adaptive=True``, the viewer's default): instead
+  of uniform passes, an :class:`~viewer.adaptive.AdaptiveRender` for the
+  full framebuffer size, advanced one draw call (``step``) at a time within
+  the same frame-time budget; its first step traces sample 0 of every pixel,
+  later ones only the pixels that still need samples (``samples`` is then
+  the mean per pixel).  Its sums (rgb, count) are uploaded into the same
+  accumulation texture whenever they change, so the display pass is the
+  same; a finished adaptive view equals ``render_adaptive`` for the seed.
 * Preview: one centred sample per pixel at a reduced resolution chosen from
   the measured cost per pixel so that a frame holds the target frame time;
   shown (upscaled) wherever the accumulation has no sample yet.
@@ -25,6 +33,7 @@ import time
 import moderngl
 import numpy as np
 
+from .adaptive import AdaptiveRender, AdaptiveSampler
 from .sampling import sample_offsets
 from .shaders import build_program
 
@@ -35,7 +44,8 @@ MAX_DRAW_PIXELS = 512 * 512
 
 
 class Progressive:
-    def __init__(self, ctx: moderngl.Context, renderer, target_ms: float = 33.0, seed: int = 0):
+    def __init__(self, ctx: moderngl.Context, renderer, target_ms: float = 33.0, seed: int = 0,
+                 adaptive: bool = False):
         self.ctx = ctx
         self.renderer = renderer
         self.target_ms = float(target_ms)
@@ -52,6 +62,12 @@ class Progressive:
         self.last_trace_ms = 0.0
         self._offsets = None
         self._offsets_key = None
+        # adaptive mode: the render in progress (or finished), what of it is in accum_tex
+        self._adaptive = bool(adaptive)
+        self.job: AdaptiveRender | None = None
+        self._uploaded_spent = 0
+        self._step_s = 0.0  # duration of the latest adaptive step (predicts the next one)
+        self.uploads = 0  # times accum_tex got new adaptive sums (the viewer shows them at once)
 
     # ------------------------------------------------------------ state
 
@@ -60,14 +76,54 @@ class Progressive:
         return int(self.renderer.scene.render.samples)
 
     @property
+    def adaptive(self) -> bool:
+        return self._adaptive
+
+    @adaptive.setter
+    def adaptive(self, on: bool) -> None:
+        """Switch between adaptive and uniform accumulation (starts over)."""
+        on = bool(on)
+        if on != self._adaptive:
+            self._adaptive = on
+            self.restart()
+
+    @property
     def done(self) -> bool:
+        if self._adaptive:
+            return self.job is not None and self.job.done
         return self.passes_done >= self.samples
+
+    @property
+    def started(self) -> bool:
+        """Some full-resolution work for the current view has been traced."""
+        if self._adaptive:
+            return self.job is not None and (self.job.draws_done > 0 or self.job.spent > 0)
+        return self.passes_done > 0 or self.next_row > 0
+
+    @property
+    def has_full_sample(self) -> bool:
+        """Every pixel of accum_tex has at least one sample."""
+        if self._adaptive:
+            w, h = self.size
+            return self.job is not None and w * h > 0 and self._uploaded_spent >= w * h
+        return self.passes_done > 0
+
+    @property
+    def mean_spp(self) -> float:
+        """Mean samples per pixel accumulated so far (the pixels' counts in
+        accum_tex averaged over the framebuffer)."""
+        w, h = self.size
+        if w * h == 0:
+            return 0.0
+        if self._adaptive:
+            return self._uploaded_spent / (w * h) if self.job is not None else 0.0
+        return self.passes_done + self.next_row / h
 
     @property
     def active_resolution(self) -> tuple[int, int]:
         """What the latest trace work ran at: the preview's size until the
         first full-resolution band lands, then the full size."""
-        if (self.passes_done > 0 or self.next_row > 0) or self.preview_size is None:
+        if self.started or self.preview_size is None:
             return self.size
         return self.preview_size
 
@@ -105,11 +161,19 @@ class Progressive:
         self.restart()
 
     def restart(self) -> None:
-        """The scene changed: throw the accumulated samples away."""
+        """The scene changed: throw the accumulated samples away (and the
+        adaptive render in progress, with its GL objects)."""
         self.passes_done = 0
         self.next_row = 0
+        self._release_job()
         if self.accum_fbo is not None:
             self.accum_fbo.clear(0.0, 0.0, 0.0, 0.0)
+
+    def _release_job(self) -> None:
+        if self.job is not None:
+            self.job.release()
+            self.job = None
+        self._uploaded_spent = 0
 
     # ------------------------------------------------------------ tracing
 
@@ -171,6 +235,8 @@ class Progressive:
         w, h = self.size
         if w == 0 or h == 0 or self.done:
             return 0.0
+        if self._adaptive:
+            return self._accumulate_adaptive(budget_ms, stop_at_pass_end)
         budget = (self.target_ms if budget_ms is None else budget_ms) / 1000.0
         ctx = self.ctx
         self.accum_fbo.use()
@@ -201,10 +267,79 @@ class Progressive:
         self.last_trace_ms = (time.perf_counter() - t_start) * 1000.0
         return self.last_trace_ms
 
+    # ------------------------------------------------------------ adaptive
+
+    def _accumulate_adaptive(self, budget_ms: float | None, stop_at_first_sample: bool = False) -> float:
+        """Advance the adaptive render by as many draw calls (steps) as fit
+        in the budget (at least one; with ``stop_at_first_sample``, also
+        stop once every pixel has a sample), then upload its sums if they
+        changed; return ms spent."""
+        w, h = self.size
+        if self.job is None:
+            self.job = AdaptiveRender(self.renderer, w, h, self.samples, seed=self.seed)
+            self._uploaded_spent = 0
+        job = self.job
+        budget = (self.target_ms if budget_ms is None else budget_ms) / 1000.0
+        t_start = time.perf_counter()
+        first = True
+        had_sample = job.spent >= w * h
+        while not job.done:
+            left = budget - (time.perf_counter() - t_start)
+            # a step is one draw call, sized from the measured cost per
+            # pixel-sample so that it fits what is left of the budget
+            if not first and left < self._step_s:
+                break
+            first = False
+            if self.cost_per_px is not None:
+                job.sampler.fragments_per_draw = int(max(64, max(left, 0.25 * budget) / self.cost_per_px))
+            else:
+                job.sampler.fragments_per_draw = 8 * w
+            t0 = time.perf_counter()
+            job.sampler.last_draw_fragments = 0
+            job.step()
+            self._step_s = time.perf_counter() - t0
+            self._note_cost(self._step_s, job.sampler.last_draw_fragments)
+            if stop_at_first_sample and not had_sample and job.spent >= w * h:
+                break
+        self._upload()
+        if job.done:
+            job.release()  # its GL objects (the sums stay): nothing more to trace
+        self.last_trace_ms = (time.perf_counter() - t_start) * 1000.0
+        return self.last_trace_ms
+
+    def compile_adaptive(self) -> None:
+        """Compile the shader variants an adaptive render of the current
+        scene uses (the renderer keeps them), which it otherwise compiles on
+        first use: the first pass's, and the pixel lists' (needed only once
+        a pixel gets a second sample).  For the viewer's soak, which counts
+        GL objects and wants every program compiled during its warm-up."""
+        sampler = AdaptiveSampler(self.renderer, 1, 1)
+        try:
+            sampler.compile()
+        finally:
+            sampler.release()
+
+    def _upload(self) -> None:
+        """The adaptive sums into accum_tex (rows bottom first: rgb sums,
+        count in alpha), when they changed since the last upload."""
+        job = self.job
+        if job is None or job.spent == self._uploaded_spent:
+            return
+        self.accum_tex.write(np.ascontiguousarray(job.total[::-1], dtype=np.float32).tobytes())
+        self._uploaded_spent = job.spent
+        self.uploads += 1
+
     def finish_pass(self) -> None:
         """Complete the current full-resolution sample if none is complete
         yet (a screenshot needs every pixel to have one)."""
-        if self.passes_done == 0 and self.size[0] > 0 and self.size[1] > 0:
+        w, h = self.size
+        if w == 0 or h == 0:
+            return
+        if self._adaptive:
+            while not self.has_full_sample and not self.done:
+                self._accumulate_adaptive(budget_ms=1e9, stop_at_first_sample=True)
+            return
+        if self.passes_done == 0:
             while self.passes_done == 0:
                 self.accumulate(budget_ms=1e9, stop_at_pass_end=True)
 
@@ -214,6 +349,9 @@ class Progressive:
         """(H, W, 3) float32 linear radiance, each pixel the mean of its
         accumulated samples (0 where it has none), first row = top."""
         w, h = self.size
+        if self._adaptive and self.job is not None:
+            self._upload()
+            return np.ascontiguousarray(self.job.image(), dtype=np.float32)
         raw = self.accum_tex.read()
         acc = np.frombuffer(raw, dtype=np.float32).reshape(h, w, 4)[::-1]
         count = acc[:, :, 3:4]
@@ -245,9 +383,9 @@ class Progressive:
             fbo.use()
             self.ctx.clear(0.0, 0.0, 0.0, 1.0)
             return
-        if self.passes_done > 0:
+        if self.has_full_sample:
             mode = 2  # every pixel has a sample
-        elif self.next_row > 0 or self.preview_size is None:
+        elif (self.started and not self._adaptive) or self.preview_size is None:
             mode = 0  # the first sample is on its way
         else:
             mode = 3  # nothing accumulated yet: the encoded preview
@@ -293,6 +431,7 @@ class Progressive:
         self.preview8_fbo = self.preview8_tex = None
 
     def release(self) -> None:
+        self._release_job()
         self._release_targets()
         self._release_display()
         self.size = (0, 0)

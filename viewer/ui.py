@@ -51,6 +51,7 @@ class PanelResult:
     view_changed: bool = False  # the view combo picked another view (Panel.view)
     quality_changed: bool = False  # "max error" switched or its value changed
     remeasure: bool = False  # "measure again" pressed
+    adaptive_changed: bool = False  # "adaptive" switched (Panel.adaptive)
 
 
 class Panel:
@@ -66,6 +67,7 @@ class Panel:
         self.max_error_on = False  # "max error": render settings picked by viewer.quality
         self.max_error = 0.02
         self.quality_status = ""  # "measuring ...", the pick, set by the app
+        self.adaptive = True  # adaptive accumulation (the app keeps it in step with Progressive)
 
     def _open(self) -> None:
         if self.open_all:
@@ -159,6 +161,11 @@ class Panel:
             if c:
                 r.min_weight, res.changed = v, True
             imgui.end_disabled()
+            c, on = imgui.checkbox("adaptive", self.adaptive)
+            if c and bool(on) != self.adaptive:
+                self.adaptive, res.adaptive_changed = bool(on), True
+            if imgui.is_item_hovered():
+                imgui.set_tooltip("samples only where pixels still need them (samples = the mean per pixel)")
             c, v = _float("exposure", r.exposure, 0.01, 1e-4, 1e4, "%.3f", imgui.SliderFlags_.logarithmic)
             if c:
                 r.exposure, res.changed = v, True

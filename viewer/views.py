@@ -48,9 +48,12 @@ def _legend(width: int, lo: float, hi: float, unit: str) -> np.ndarray:
     im = Image.fromarray(np.round(bar * 255).astype(np.uint8))
     draw = ImageDraw.Draw(im)
     left, right = f"{lo:g} {unit}", f"{hi:g} {unit}"
+    if draw.textlength(left) + draw.textlength(right) + 8 > width:
+        left, right = f"{lo:g}", f"{hi:g}"           # a narrow image: the numbers only
     draw.text((2, 2), left, fill=(255, 255, 255))
     tw = draw.textlength(right)
-    draw.text((width - tw - 2, 2), right, fill=(0, 0, 0))
+    if draw.textlength(left) + tw + 8 <= width:
+        draw.text((width - tw - 2, 2), right, fill=(0, 0, 0))
     return np.asarray(im, np.float64) / 255
 
 

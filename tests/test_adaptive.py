@@ -1,0 +1,892 @@
+"""Adaptive anti-aliasing (viewer/adaptive.py) and its command line
+(`glassray render --adaptive/--no-adaptive`, `--target-error E`,
+`--view samples`).
+
+Every expectation comes from a route independent of the adaptive code:
+analytic values (hand-made sums, a silhouette circle computed from the
+spec's pinhole camera, the pixel area inside it), uniform renders through
+Renderer.render (the same Owen-scrambled Sobol' pattern, so a pixel that
+stopped after n samples must equal the uniform n-sample render there), the
+float64 reference tracer, and invariances (seed, draw layout, interleaving).
+
+Images are small (48x27 to 96x54) so that the file runs in well under a
+minute on llvmpipe.  Tolerances are stated, with the measured value they
+leave room for, in each test's docstring.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from conftest import make_scene
+from viewer import adaptive as A
+from viewer.adaptive import (FIRST_ROUND, MAX_SPP_FACTOR, ROUND_FACTOR, AdaptiveRender, Sums, choose_by_gain,
+                             choose_within_budget, coherent_order, colour_contrast, first_hit_edges, half_error,
+                             pixel_error, render_adaptive, standard_error)
+from viewer.imageio import to_display8
+from viewer.reference import render_reference
+from viewer.renderer import DEFAULT_TILE, Renderer
+from viewer.scene import load_scene
+
+# ---------------------------------------------------------------- scenes
+
+#: Opaque, lit, no checker: flat regions with silhouettes and shadow edges
+#: between them (where adaptivity should pay off).
+LIT = {"camera": {"position": [0.0, 1.8, 4.5], "target": [0, 0.7, 0], "fov": 40},
+       "render": {"max_depth": 4},
+       "sky": {"type": "color", "color": [0.6, 0.7, 0.9]},
+       "lights": [{"type": "point", "position": [3, 5, 4]}],
+       "materials": {"floor": {"color": [0.7, 0.7, 0.7]}, "red": {"color": [0.85, 0.2, 0.15]},
+                     "blue": {"color": [0.2, 0.3, 0.9]}},
+       "objects": [{"type": "plane", "material": "floor"},
+                   {"type": "sphere", "center": [-0.8, 0.5, 0], "radius": 0.5, "material": "red"},
+                   {"type": "box", "min": [0.3, 0.0, -0.4], "max": [1.1, 0.8, 0.4], "rotate": [0, 30, 0],
+                    "material": "blue"}]}
+
+EMISSION = 0.8
+EMITTER = {"color": [0, 0, 0], "ambient": 0, "diffuse": 0, "emission": [EMISSION] * 3}
+#: Nothing but emission on a black sky, no lights: a pixel's exact
+#: (box-filtered) value is EMISSION times the share of its square inside
+#: the silhouette.
+DARK = {"ambient": [0, 0, 0], "sky": {"type": "color", "color": [0, 0, 0]}, "lights": [],
+        "camera": {"position": [0, 0, 5], "target": [0, 0, 0], "fov": 40},
+        "materials": {"e": EMITTER}}
+SILHOUETTES = {
+    # A sphere of radius 1 centred on the optical axis 5 away: its
+    # silhouette is the circle of half-angle asin(1/5) around the axis.
+    "sphere": (dict(DARK, objects=[{"type": "sphere", "center": [0, 0, 0], "radius": 1, "material": "e"}]),
+               math.tan(math.asin(1 / 5))),
+    # A cylinder along z whose front cap (radius 1, at z = 1, 4 from the
+    # eye) faces the camera: a flat disc, tan = 1/4; its side is hidden.
+    "disc": (dict(DARK, objects=[{"type": "cylinder", "axis": "z", "base": [0, 0, -1], "radius": 1, "height": 2,
+                                  "material": "e"}]), 0.25),
+}
+
+FLAT_COLOUR = [0.3, 0.6, 0.9]
+_FLAT_EMITTER = dict(EMITTER, emission=FLAT_COLOUR)
+_FLAT = {"ambient": [0, 0, 0], "sky": {"type": "color", "color": FLAT_COLOUR}, "lights": [],
+         "materials": {"e": _FLAT_EMITTER}}
+FLAT_SCENES = {
+    "sky-only": dict(_FLAT, camera={"position": [0.3, 0.2, 0.1], "target": [2, 1, -3], "fov": 90}),
+    # one face of a huge box fills the view: no edge of any kind in sight
+    "box-face": dict(_FLAT, camera={"position": [1, 2, 60], "target": [0, 0, 0], "fov": 60},
+                     objects=[{"type": "box", "min": [-50, -50, -50], "max": [50, 50, 50], "material": "e"}]),
+}
+#: The camera inside a huge emissive box of the sky's colour: one flat
+#: colour, but the box's edges and corners are in view.
+INSIDE_BOX = dict(_FLAT, camera={"position": [0.3, 0.2, 0.1], "target": [2, 1, -3], "fov": 90},
+                  objects=[{"type": "box", "min": [-50, -50, -50], "max": [50, 50, 50], "material": "e"}])
+
+
+# ---------------------------------------------------------------- helpers
+
+
+@pytest.fixture(scope="module")
+def renderer_for(gl):
+    """renderer_for(key, doc_or_name) -> a Renderer cached for the module
+    (each one compiles its shaders once)."""
+    made: dict = {}
+
+    def get(key, source=None):
+        gl.__enter__()                         # tests of contexts may have switched
+        if key not in made:
+            src = key if source is None else source
+            scene = make_scene(src, name=key) if isinstance(src, dict) else load_scene(src)
+            made[key] = Renderer(gl, scene)
+        return made[key]
+
+    yield get
+    for r in made.values():
+        r.release()
+
+
+def rmse(a, b) -> float:
+    return float(np.sqrt(np.mean((np.asarray(a, np.float64) - np.asarray(b, np.float64)) ** 2)))
+
+
+def off_fraction(a, b) -> float:
+    """Share of pixels whose 8-bit sRGB encodings differ by more than 1 level."""
+    d = np.abs(to_display8(a).astype(int) - to_display8(b).astype(int)).max(axis=-1)
+    return float(np.mean(d > 1))
+
+
+def silhouette_distance(w: int, h: int, fov: float, tan_half_angle: float):
+    """Signed distance (pixels) of each pixel centre from the silhouette
+    circle of an object centred on the optical axis (negative inside), and
+    the circle's radius in pixels.  From the spec's camera: the ray of
+    continuous pixel position (x, y) is f + a right + b up with
+    a = (2x/W - 1) t W/H = (2x - W) t / H and b = (H - 2y) t / H, so the
+    cone sqrt(a^2 + b^2) = tan_half_angle is the circle of radius
+    tan_half_angle H / (2 t) around (W/2, H/2)."""
+    t = math.tan(math.radians(fov) / 2)
+    radius = tan_half_angle * h / (2 * t)
+    j, i = np.mgrid[0:h, 0:w]
+    return np.hypot(i + 0.5 - w / 2, j + 0.5 - h / 2) - radius, radius
+
+
+def coverage(w: int, h: int, radius: float, sub: int = 64) -> np.ndarray:
+    """(H, W): the share of each pixel square inside the circle of `radius`
+    around (W/2, H/2), on a sub x sub grid of points per pixel."""
+    s = (np.arange(sub) + 0.5) / sub
+    x = (np.arange(w)[:, None] + s[None, :]).ravel() - w / 2       # (W*sub,)
+    y = (np.arange(h)[:, None] + s[None, :]).ravel() - h / 2       # (H*sub,)
+    inside = (x[None, :] ** 2 + y[:, None] ** 2) < radius ** 2
+    return inside.reshape(h, sub, w, sub).mean(axis=(1, 3))
+
+
+def sums_of(samples) -> Sums:
+    """Sums of one row of pixels, each given as its list of (r, g, b)
+    samples in index order, built from the definitions in Sums' docstring:
+    total = sum (L, 1); moments = sum (L [odd index], L.L)."""
+    total = np.zeros((1, len(samples), 4))
+    moments = np.zeros((1, len(samples), 4))
+    for p, pix in enumerate(samples):
+        for k, L in enumerate(pix):
+            L = np.asarray(L, np.float64)
+            total[0, p, :3] += L
+            total[0, p, 3] += 1
+            if k % 2 == 1:
+                moments[0, p, :3] += L
+            moments[0, p, 3] += L @ L
+    return Sums(total, moments)
+
+
+def grey(v):
+    return (v, v, v)
+
+
+def red(v):
+    return (v, 0.0, 0.0)
+
+
+# ================================================================ pure helpers
+
+
+def test_colour_contrast_of_a_spike_and_of_ramps():
+    """A single bright pixel has contrast 1 at itself and its 8 neighbours
+    and 0 elsewhere (3x3 neighbourhood); on per-channel linear ramps the
+    contrast is the largest channel's step, edges included (replicated
+    borders only lower a difference, never raise it)."""
+    img = np.zeros((6, 7, 3))
+    img[2, 3, 1] = 1.0
+    c = colour_contrast(img)
+    expect = np.zeros((6, 7))
+    expect[1:4, 2:5] = 1.0
+    np.testing.assert_array_equal(c, expect)
+
+    j, i = np.mgrid[0:5, 0:9]
+    ramps = np.stack([0.1 * i, 0.02 * j, 0.3 * i], axis=2)   # steps 0.1 (x), 0.02 (y), 0.3 (x)
+    np.testing.assert_allclose(colour_contrast(ramps), 0.3, atol=1e-12)
+    # the diagonal neighbour counts: a ramp along x + y has step 2 * 0.05,
+    # except at the two corners whose diagonal neighbour along the ramp lies
+    # outside (replicated, it is the pixel's own row or column: 0.05)
+    diag = np.repeat((0.05 * (i + j))[..., None], 3, axis=2)
+    expect = np.full((5, 9), 0.1)
+    expect[0, -1] = expect[-1, 0] = 0.05
+    np.testing.assert_allclose(colour_contrast(diag), expect, atol=1e-12)
+    assert np.all(colour_contrast(np.full((4, 4, 3), 0.7)) == 0)
+
+
+def test_first_hit_edges_objects_normals_and_depth():
+    """Edges where, within a pixel's 3x3 neighbourhood, the object changes,
+    the normal turns by more than normal_angle_deg (25 by default), or the
+    distance jumps by more than depth_jump (0.1) relative to the nearer:
+    hand-made maps whose answers are the columns next to a boundary."""
+    h, w = 5, 8
+    left = np.arange(w) < 4                             # boundary between columns 3 and 4
+    near_boundary = np.zeros((h, w), bool)
+    near_boundary[:, 3:5] = True
+    z = np.zeros((h, w, 3))
+    z[..., 2] = 1.0
+
+    # one object, one normal, one depth: no edge
+    t = np.full((h, w), 2.0)
+    obj = np.zeros((h, w), np.int32)
+    assert not first_hit_edges(t, obj, z).any()
+
+    # another object on the right half
+    assert np.array_equal(first_hit_edges(t, np.where(left, 0, 1)[None].repeat(h, 0), z), near_boundary)
+
+    # the sky (object -1, t = inf) on the right half
+    sky_t = np.where(left, 2.0, np.inf)[None].repeat(h, 0)
+    sky_obj = np.where(left, 0, -1)[None].repeat(h, 0).astype(np.int32)
+    sky_n = np.where(left[None, :, None], z, 0.0)
+    assert np.array_equal(first_hit_edges(sky_t, sky_obj, sky_n), near_boundary)
+
+    # the normal turned by 30 degrees on the right: an edge; by 20: none
+    for angle, edge in ((30.0, True), (20.0, False)):
+        a = math.radians(angle)
+        n = z.copy()
+        n[:, ~left] = [math.sin(a), 0.0, math.cos(a)]
+        got = first_hit_edges(t, obj, n)
+        assert np.array_equal(got, near_boundary if edge else np.zeros((h, w), bool)), angle
+        # and the threshold is the argument
+        assert np.array_equal(first_hit_edges(t, obj, n, normal_angle_deg=angle + 1), np.zeros((h, w), bool))
+
+    # depth 2.0 -> 2.3 (15 % of the nearer): an edge; 2.0 -> 2.1 (5 %): none
+    for far, edge in ((2.3, True), (2.1, False)):
+        tt = np.where(left, 2.0, far)[None].repeat(h, 0)
+        assert np.array_equal(first_hit_edges(tt, obj, z), near_boundary if edge else np.zeros((h, w), bool))
+    tt = np.where(left, 2.0, 2.1)[None].repeat(h, 0)
+    assert np.array_equal(first_hit_edges(tt, obj, z, depth_jump=0.01), near_boundary)
+
+
+@pytest.mark.parametrize("w, h", [(20, 13), (8, 8), (5, 17)])
+def test_coherent_order_is_a_tile_by_tile_permutation(w, h):
+    """coherent_order returns the same pixels, each once; the list visits
+    8x8 tiles one after the other (row of tiles by row of tiles), each tile
+    in one contiguous run, row by row inside it; consecutive entries of a
+    full image inside a tile are image neighbours (same row, next column)
+    or the next row of the tile.  The order does not depend on the input
+    order."""
+    rng = np.random.default_rng(1)
+    full = np.arange(w * h)
+    for pixels in (full, rng.choice(full, size=max(1, w * h // 3), replace=False)):
+        shuffled = rng.permutation(pixels)
+        out = coherent_order(shuffled, w)
+        assert sorted(out.tolist()) == sorted(pixels.tolist())
+        np.testing.assert_array_equal(out, coherent_order(np.sort(pixels), w))
+        i, j = out % w, out // w
+        tiles_x = -(-w // 8)
+        tile = (j // 8) * tiles_x + i // 8
+        assert np.all(np.diff(tile) >= 0), "tiles in row-major order, each in one run"
+        inner = (j % 8) * 8 + i % 8
+        same = np.diff(tile) == 0
+        assert np.all(np.diff(inner)[same] > 0), "row by row inside a tile"
+        if len(pixels) == w * h:
+            di, dj = np.diff(i)[same], np.diff(j)[same]
+            step = ((di == 1) & (dj == 0)) | ((dj == 1) & (di < 0))
+            assert np.all(step)
+            assert np.all(np.abs(di[dj == 0]) == 1)
+
+
+def test_half_standard_and_pixel_error_of_hand_made_samples():
+    """Sums built from their definition for sample lists with known means
+    and spreads (red channel only unless said):
+      0,1,0,1:  halves 0 and 1 -> half 0.5; s^2 = 1/3 -> se sqrt(1/12)
+      0,1,1,0:  halves 0.5 and 0.5 -> half 0 (a split with the same mix in
+                both halves), se sqrt(1/12) still sees the spread
+      0,1,0:    odd half {1}, even {0, 0} -> half 0.5; s^2 = 1/3 -> se 1/3
+      0.7 x 4 (grey): no spread -> 0 and 0
+      one sample: 0 and 0 (below two samples)
+      (0,0,0),(1,1,0): half 0.5 (largest channel); the variances of the
+                channels add up: s^2 = 0.5 + 0.5 -> se sqrt(1/2)
+    pixel_error is the larger of the two."""
+    cases = [
+        ([red(0), red(1), red(0), red(1)], 0.5, math.sqrt(1 / 12)),
+        ([red(0), red(1), red(1), red(0)], 0.0, math.sqrt(1 / 12)),
+        ([red(0), red(1), red(0)], 0.5, 1 / 3),
+        ([grey(0.7)] * 4, 0.0, 0.0),
+        ([grey(0.9)], 0.0, 0.0),
+        ([(0, 0, 0), (1, 1, 0)], 0.5, math.sqrt(0.5)),
+        ([red(0.25)] * 3 + [red(1.25)] * 3, 1 / 6, math.sqrt(0.3 / 6)),   # 0.25,0.25,0.25,1.25,1.25,1.25
+    ]
+    sums = sums_of([c[0] for c in cases])
+    np.testing.assert_allclose(half_error(sums)[0], [c[1] for c in cases], atol=1e-6)
+    np.testing.assert_allclose(standard_error(sums)[0], [c[2] for c in cases], atol=1e-6)
+    np.testing.assert_allclose(pixel_error(sums)[0], [max(c[1], c[2]) for c in cases], atol=1e-6)
+    np.testing.assert_allclose(sums.count[0], [len(c[0]) for c in cases])
+    np.testing.assert_allclose(sums.mean[0, 0], [0.5, 0, 0], atol=1e-12)
+
+
+def test_standard_error_shrinks_as_one_over_sqrt_n():
+    """Alternating 0/1 samples: s^2 = n / (4 (n - 1)), so se = 1 / (2 sqrt(n - 1))."""
+    ns = [2, 4, 16, 64, 256]
+    sums = sums_of([[red(k % 2) for k in range(n)] for n in ns])
+    np.testing.assert_allclose(standard_error(sums)[0], [1 / (2 * math.sqrt(n - 1)) for n in ns], rtol=1e-9)
+    np.testing.assert_allclose(half_error(sums)[0], 0.5)
+
+
+def test_choose_within_budget_takes_all_or_the_largest_errors():
+    """All active pixels when left pays for per_pixel each; otherwise the
+    left // per_pixel ones with the largest error, ties by position (the
+    lower flat index first); never an inactive pixel; none when one upgrade
+    is not affordable."""
+    active = np.array([[True, False, True, True], [True, True, False, True]])
+    error = np.array([[0.2, 9.0, 0.5, 0.2], [0.7, 0.2, 9.0, 0.1]])
+    np.testing.assert_array_equal(choose_within_budget(active, error, 3, 6 * 3), active)
+    np.testing.assert_array_equal(choose_within_budget(active, error, 3, 100), active)
+    got = choose_within_budget(active, error, 3, 3 * 3 + 2)          # room for 3
+    expect = np.zeros_like(active)
+    expect[1, 0] = expect[0, 2] = True                               # 0.7, 0.5
+    expect[0, 0] = True                                              # the first of the 0.2 ties
+    np.testing.assert_array_equal(got, expect)
+    assert not choose_within_budget(active, error, 3, 2).any()
+    # property: within budget, inside active, and no unchosen active pixel has a larger error
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        act = rng.random((4, 6)) < 0.6
+        err = rng.integers(0, 4, (4, 6)).astype(float)                # many ties
+        per, left = int(rng.integers(1, 6)), int(rng.integers(0, 80))
+        out = choose_within_budget(act, err, per, left)
+        assert out.sum() * per <= left
+        assert not (out & ~act).any()
+        if out.any() and (act & ~out).any():
+            assert err[out].min() >= err[act & ~out].max()
+
+
+def test_choose_by_gain_hand_case():
+    """choose_by_gain ranks by error^2 / n and takes a prefix of that order
+    whose cost (n (ROUND_FACTOR - 1) each) fits share x left and left, at
+    least the first one when it fits left; ties by position."""
+    want = np.array([[True, True, True, True, True, False]])
+    count = np.array([[4, 4, 8, 16, 4, 4]], float)
+    error = np.array([[0.2, 0.4, 0.4, 1.0, 0.4, 5.0]])
+    # gains error^2 / n: 0.01, 0.04, 0.02, 0.0625, 0.04 (index 4 ties index 1,
+    # which comes first), and index 5 is not wanted
+    order = [3, 1, 4, 2, 0]
+    # every cost is n (ROUND_FACTOR - 1): the budgets below are in units of it
+    unit = ROUND_FACTOR - 1
+
+    def chosen(left, share=0.5):
+        return np.flatnonzero(choose_by_gain(want, error, count, left * unit, share)[0]).tolist()
+
+    # all of them when half the budget pays for all
+    assert chosen(2 * int(count[0, :5].sum())) == sorted(order)
+    # costs (in order 3, 1, 4, 2, 0) 16, 4, 4, 8, 4: cumulative 16, 20, 24, 32, 36
+    # share = 0.5 of left = 100 -> 50: all five fit
+    assert chosen(100) == sorted(order)
+    # left = 50 -> cap 25: 16, 20, 24 fit; + 8 = 32 does not
+    assert chosen(50) == sorted([3, 1, 4])
+    # left = 40 -> cap 20: 16 + 4
+    assert chosen(40) == sorted([3, 1])
+    # cap below the first cost but left pays for it: exactly the first
+    assert chosen(16) == [3]
+    assert chosen(16, share=0.01) == [3]
+    # not even the first affordable: nothing
+    assert choose_by_gain(want, error, count, 16 * unit - 1).sum() == 0
+    # nothing wanted
+    assert not choose_by_gain(np.zeros_like(want), error, count, 1000).any()
+
+
+def test_choose_by_gain_respects_the_budget_and_the_order():
+    """Random cases: the cost of the chosen pixels never exceeds left nor
+    max(share x left, the first one's cost); they are a prefix of the order
+    by error^2 / n (no unchosen pixel has a strictly larger gain than a
+    chosen one), the result is deterministic and only wanted pixels."""
+    rng = np.random.default_rng(11)
+    for _ in range(300):
+        shape = (3, 5)
+        want = rng.random(shape) < 0.7
+        count = (2 ** rng.integers(0, 5, shape)).astype(float)
+        error = rng.integers(0, 5, shape) * 0.1
+        left = int(rng.integers(0, 120))
+        share = float(rng.choice([0.25, 0.5, 1.0]))
+        out = choose_by_gain(want, error, count, left, share)
+        np.testing.assert_array_equal(out, choose_by_gain(want, error, count, left, share))
+        assert not (out & ~want).any()
+        cost = float((count[out] * (ROUND_FACTOR - 1)).sum())
+        assert cost <= left
+        gain = error ** 2 / count
+        if out.any():
+            first = (count[want] * (ROUND_FACTOR - 1))[np.lexsort((np.flatnonzero(want),
+                                                                    -gain[want]))[0]]
+            assert cost <= max(share * left, first)
+            rest = want & ~out
+            if rest.any():
+                assert gain[out].min() >= gain[rest].max()
+
+
+# ================================================================ renders
+
+
+@pytest.mark.parametrize("key, source, size", [
+    ("glass-sphere", None, (48, 27)),
+    ("lit-exposed", dict(LIT, render={"max_depth": 4, "exposure": 1.7}), (48, 27)),
+    ("glass-sphere", None, (7, 3)),
+    ("glass-sphere", None, (1, 1)),
+])
+def test_each_pixel_is_the_mean_of_its_first_n_samples(renderer_for, key, source, size):
+    """The samples follow the shared progressive pattern, so a pixel that
+    ended with n samples must equal, there, the uniform render with n
+    samples and the same seed (Renderer.render: every prefix of the pattern
+    is the shorter pattern, tests/test_sampling.py).  Exposure included.
+    Tolerance 2e-5 absolute: float32 sums of up to 128 samples in another
+    order (measured <= 4e-7); a wrong offset, sample index, pixel or
+    exposure is off by 1e-2 or more on the edge pixels that get many
+    samples."""
+    r = renderer_for(key, source)
+    w, h = size
+    res = render_adaptive(r, w, h, samples=16, target_error=0.002, seed=5)
+    assert res.image.shape == (h, w, 3) and res.image.dtype == np.float32
+    assert res.spp.shape == (h, w)
+    counts = np.unique(res.spp)
+    if w * h > 100:
+        assert len(counts) >= 3, counts                    # the test sees several counts
+    seen_difference = 0.0
+    for n in counts:
+        uniform = r.render(w, h, int(n), seed=5)
+        m = res.spp == n
+        np.testing.assert_allclose(res.image[m], uniform[m], atol=2e-5, rtol=0, err_msg=f"n = {n}")
+        if n > 1:
+            seen_difference = max(seen_difference, float(np.abs(uniform[m] - r.render(w, h, 1, seed=5)[m]).max()))
+    if w * h > 100:
+        assert seen_difference > 0.05, "pixels with more samples should differ from their centre sample"
+    image, spp = res                                        # AdaptiveResult unpacks
+    assert image is res.image and spp is res.spp
+
+
+def test_high_budget_adaptive_converges_to_the_uniform_and_reference_images(renderer_for):
+    """LIT at 48x27: a budget of 128 samples (one pixel up to 1024) with a
+    tiny target (1e-4) against a 2048-sample uniform render (another seed)
+    and the float64 reference tracer at 256 samples.
+    Tolerances: RMSE 0.001 and at most 1 % of the pixels more than 1/255
+    off in 8-bit sRGB against the uniform image (measured 0.0003 and
+    0.2 %; the uniform 128-sample render itself is at 0.0008 and 1.2 %);
+    against the reference, whose own 256 samples leave 0.0004 and 0.3 %,
+    RMSE 0.0015 and 2 % (measured 0.0004 and 0.4 %).  A bias (a wrong
+    sample, pixel or weight) shows at once: one centred sample per pixel
+    is at 0.066."""
+    r = renderer_for("lit", LIT)
+    w, h = 48, 27
+    res = render_adaptive(r, w, h, samples=128, target_error=1e-4, seed=0)
+    converged = r.render(w, h, 2048, seed=7)
+    assert rmse(res.image, converged) < 0.001
+    assert off_fraction(res.image, converged) <= 0.01
+    ref = render_reference(r.scene, w, h, samples=256, seed=3)
+    assert rmse(res.image, ref) < 0.0015
+    assert off_fraction(res.image, ref) <= 0.02
+    # the test can fail: a 1-sample image is far off
+    assert rmse(r.render(w, h, 1), converged) > 0.005
+
+
+def test_high_budget_adaptive_on_glass_sphere_matches_uniform(renderer_for):
+    """glass-sphere at 48x27 (refracted checker: most pixels hold edges,
+    convergence is slow for both): at a budget of 256 the adaptive image is
+    as close to a 2048-sample uniform render (another seed) as the uniform
+    256-sample render is, within 30 % in RMSE (measured 1.0x: 0.0019
+    both) and below 0.004 absolute."""
+    r = renderer_for("glass-sphere")
+    w, h = 48, 27
+    converged = r.render(w, h, 2048, seed=7)
+    res = render_adaptive(r, w, h, samples=256, target_error=1e-4, seed=0)
+    uniform = r.render(w, h, 256, seed=0)
+    assert rmse(res.image, converged) <= 1.3 * rmse(uniform, converged)
+    assert rmse(res.image, converged) < 0.004
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_adaptive_beats_uniform_at_equal_mean_samples_on_edges(renderer_for, seed):
+    """LIT at 64x36, 8 samples per pixel on average with the default target
+    error: against a 1024-sample uniform render (seed 5) the adaptive RMSE
+    is below 0.6 x that of the uniform 8-sample render of the same seed
+    (measured 0.25-0.30 x, seeds 0-2), and the mean spent is within the
+    budget."""
+    r = renderer_for("lit", LIT)
+    w, h = 64, 36
+    converged = r.render(w, h, 1024, seed=5)
+    res = render_adaptive(r, w, h, samples=8, seed=seed)
+    assert res.mean_spp <= 8
+    uniform = r.render(w, h, 8, seed=seed)
+    assert rmse(res.image, converged) < 0.6 * rmse(uniform, converged), \
+        (rmse(res.image, converged), rmse(uniform, converged))
+
+
+@pytest.mark.xfail(strict=True, reason="on checker scenes at a budget of 8 the adaptive image is 20-45 % worse "
+                                       "(RMSE) than the uniform one: pixels left at FIRST_ROUND = 4 samples whose "
+                                       "samples agree are ranked below upgrades from 8 to 16 and carry most of "
+                                       "the error (see the report of issue 7)")
+@pytest.mark.parametrize("name", ["tests/scenes/box-rotated.toml", "bench-opaque"])
+def test_adaptive_is_no_worse_than_uniform_on_checker_scenes(renderer_for, name):
+    """A checker floor under objects at 64x36, budget 8, seeds 0 and 1:
+    adaptivity should at least not lose to the uniform render of the same
+    mean samples per pixel (RMSE against a 1024-sample uniform render).
+    Measured: 1.22-1.44 x the uniform RMSE (at budgets 4 and 16 about
+    0.8-1.0 x)."""
+    path = os.path.join(os.path.dirname(__file__), os.pardir, name) if name.endswith(".toml") else name
+    r = renderer_for(name, path)
+    w, h = 64, 36
+    converged = r.render(w, h, 1024, seed=5)
+    for seed in (0, 1):
+        res = render_adaptive(r, w, h, samples=8, seed=seed)
+        uniform = r.render(w, h, 8, seed=seed)
+        assert rmse(res.image, converged) <= rmse(uniform, converged), seed
+
+
+@pytest.mark.parametrize("shape", ["sphere", "disc"])
+def test_samples_go_to_the_analytic_silhouette(renderer_for, shape):
+    """An emitter (0.8) on a black sky, centred on the optical axis: the
+    silhouette is a circle known from the spec's camera
+    (silhouette_distance), radius 15.1 px (sphere) or 18.5 px (disc) at
+    96x54.  Budget 8 (max 64), default target.
+    - The picture is where the geometry says: pixels whose centre is more
+      than 1 px inside are 0.8, more than 1 px outside 0.
+    - Pixels the circle crosses average at least half of max_spp (measured
+      64 = all of it) and 20x the mean of pixels more than 3 px away.
+    - Pixels farther than 2 sqrt(2) px (rounded to 3) from the circle keep
+      1 sample: a pixel is flagged only if two centres within Chebyshev
+      distance 2 of it (3x3 test, then dilated by one) lie on opposite sides
+      of the circle, or (sphere) the normal turns by more than 25 degrees
+      between neighbours, which happens only in the outermost pixel of the
+      sphere's image.
+    - At least 80 % of the samples beyond the first lie on pixels whose
+      centre is within 2 px of the circle (measured 96-97 %).
+    - Crossed pixels converge to 0.8 x the share of their square inside
+      the circle (64x64 points per pixel): mean error below 0.02 and no
+      pixel off by more than 0.1 (a 64-point net on a smooth edge;
+      measured 0.009-0.010 and 0.029-0.036)."""
+    doc, tan_half = SILHOUETTES[shape]
+    r = renderer_for(f"silhouette-{shape}", doc)
+    w, h = 96, 54
+    samples = 8
+    max_spp = MAX_SPP_FACTOR * samples
+    res = render_adaptive(r, w, h, samples=samples, seed=0)
+    d, radius = silhouette_distance(w, h, doc["camera"]["fov"], tan_half)
+    img = res.image.mean(axis=2)
+    assert np.all(np.abs(img[d < -1] - EMISSION) < 1e-5)
+    assert np.all(img[d > 1] == 0)
+
+    cov = coverage(w, h, radius)
+    crossed = (cov > 0) & (cov < 1)
+    far = np.abs(d) > 3
+    assert crossed.sum() > 50
+    assert res.spp[crossed].mean() >= 0.5 * max_spp
+    assert res.spp[crossed].mean() >= 20 * res.spp[far].mean()
+    assert np.all(res.spp[far] == 1), np.unique(res.spp[far])
+    extra = (res.spp - 1).astype(float)
+    assert extra[np.abs(d) <= 2].sum() >= 0.8 * extra.sum()
+    assert res.mean_spp <= samples
+
+    err = np.abs(img - EMISSION * cov)[crossed]
+    assert err.mean() < 0.02 and err.max() < 0.1, (err.mean(), err.max())
+
+
+def test_samples_map_png_shows_the_silhouette(renderer_for, tmp_path):
+    """The --view samples picture of the sphere scene (views.picture):
+    below the image a legend strip; pixels with one sample have the
+    legend's low end colour, pixels at the most the legend's high end
+    colour, and those lie on the ring of the silhouette: within 2.5 px of
+    the circle (the crossed pixels and the neighbours whose error their
+    NEIGHBOUR_SHARE pulls up; measured 1.96 px)."""
+    from viewer.views import picture, raw_view
+
+    doc, tan_half = SILHOUETTES["sphere"]
+    r = renderer_for("silhouette-sphere", doc)
+    w, h = 96, 54
+    res = render_adaptive(r, w, h, samples=8, seed=0)
+    pic = np.round(255 * picture("samples", raw_view(r, "samples", w, h, res.spp))).astype(np.uint8)
+    Image.fromarray(pic).save(tmp_path / "samples.png")
+    assert pic.shape[0] > h and pic.shape[1:] == (w, 3)
+    low, high = pic[-1, 0], pic[-1, -1]                    # bottom row of the legend: below its text
+    assert not np.array_equal(low, high)
+    assert np.all(pic[:h][res.spp == 1] == low)
+    assert np.all(pic[:h][res.spp == res.spp.max()] == high)
+    d, _ = silhouette_distance(w, h, doc["camera"]["fov"], tan_half)
+    hot = np.all(pic[:h] == high, axis=2)
+    assert hot.sum() > 50 and np.all(np.abs(d[hot]) < 2.5)
+
+
+def test_same_seed_same_result_other_seed_differs_but_converges(gl, renderer_for):
+    """LIT at 48x27, budget 8: the same seed gives the same image bit for bit
+    and the same samples map, also from a fresh Renderer; another seed
+    gives another image (by more than 1e-3 somewhere: another scramble of
+    the pattern), and both are within RMSE 0.007 of a 1024-sample uniform
+    render (measured 0.0026-0.0043 for seeds 3-8, where the uniform
+    8-sample render is at 0.0096-0.0109)."""
+    r = renderer_for("lit", LIT)
+    w, h = 48, 27
+    a = render_adaptive(r, w, h, samples=8, seed=3)
+    b = render_adaptive(r, w, h, samples=8, seed=3)
+    fresh = Renderer(gl, make_scene(LIT))
+    try:
+        c = render_adaptive(fresh, w, h, samples=8, seed=3)
+    finally:
+        fresh.release()
+    for other in (b, c):
+        assert np.array_equal(a.image, other.image)
+        assert np.array_equal(a.spp, other.spp)
+    d = render_adaptive(r, w, h, samples=8, seed=4)
+    assert np.abs(a.image - d.image).max() > 1e-3
+    converged = r.render(w, h, 1024, seed=5)
+    assert rmse(a.image, converged) < 0.007 and rmse(d.image, converged) < 0.007
+
+
+@pytest.mark.parametrize("name", sorted(FLAT_SCENES))
+def test_a_flat_scene_takes_one_sample_per_pixel(renderer_for, name):
+    """One colour everywhere and no edge in view: every pixel ends with one
+    sample (nothing to flag), and the image is the 1-sample uniform render
+    bit for bit (both are the centre sample, divided by 1)."""
+    r = renderer_for(f"flat-{name}", FLAT_SCENES[name])
+    w, h = 48, 27
+    res = render_adaptive(r, w, h, samples=16, seed=2)
+    assert np.all(res.spp == 1)
+    assert np.array_equal(res.image, r.render(w, h, 1))
+    np.testing.assert_allclose(res.image, np.broadcast_to(FLAT_COLOUR, (h, w, 3)), atol=1e-6)
+
+
+def test_inside_a_box_of_one_colour_the_image_is_exact(renderer_for):
+    """Inside a huge emissive box of the sky's colour: whatever the samples
+    map, the image is the 1-sample uniform render bit for bit (every sample
+    is the same colour)."""
+    r = renderer_for("inside-box", INSIDE_BOX)
+    res = render_adaptive(r, 48, 27, samples=16, seed=2)
+    assert np.array_equal(res.image, r.render(48, 27, 1))
+
+
+def test_inside_a_box_of_one_colour_takes_one_sample_per_pixel(renderer_for):
+    """The issue's second example of a flat scene: the camera inside one
+    huge emissive box (same colour as the sky).  Its edges are edges of the
+    first interaction, but no colour differs across them."""
+    r = renderer_for("inside-box", INSIDE_BOX)
+    res = render_adaptive(r, 48, 27, samples=16, seed=2)
+    assert np.all(res.spp == 1), np.unique(res.spp, return_counts=True)
+
+
+@pytest.mark.parametrize("key, samples, max_spp", [
+    ("glass-sphere", 1, None), ("glass-sphere", 2, None), ("glass-sphere", 3, None),
+    ("glass-sphere", 5, None), ("glass-sphere", 16, None), ("glass-sphere", None, None),
+    ("lit", 8, None), ("glass-sphere", 8, 2), ("glass-sphere", 8, 3), ("glass-sphere", 8, 6),
+    ("glass-sphere", 8, 100),
+])
+def test_budget_and_per_pixel_cap(renderer_for, key, samples, max_spp):
+    """The budget is samples x W x H pixel-samples (mean <= samples; the
+    scene's render.samples = 16 when None); no pixel above max_spp
+    (MAX_SPP_FACTOR x samples by default); every pixel has at least its
+    centre sample and a whole number of samples; every count is 1 or one
+    of the documented rounds FIRST_ROUND x ROUND_FACTOR^k, or the cap; the
+    progress callback climbs to (budget, budget).  With samples = 1 the
+    first pass spends the budget: one sample everywhere."""
+    r = renderer_for(key, LIT if key == "lit" else None)
+    w, h = 48, 27
+    calls = []
+    res = render_adaptive(r, w, h, samples=samples, seed=1, max_spp=max_spp,
+                          progress=lambda done, total: calls.append((done, total)))
+    s = samples or r.scene.render.samples
+    cap = max_spp or min(MAX_SPP_FACTOR * s, A.MAX_SPP)
+    assert res.spp.dtype.kind == "i" and np.all(res.spp >= 1)
+    assert res.spp.sum() <= s * w * h
+    assert res.mean_spp <= s
+    assert res.spp.max() <= cap
+    allowed = {1, cap} | {FIRST_ROUND * ROUND_FACTOR ** k for k in range(12)}
+    assert set(np.unique(res.spp).tolist()) <= allowed
+    assert calls and calls[-1] == (s * w * h, s * w * h)
+    assert all(a[0] <= b[0] for a, b in zip(calls, calls[1:]))
+    if s == 1:
+        assert np.all(res.spp == 1)
+    if s >= 5 and max_spp is None:
+        assert res.mean_spp > 0.5 * s               # the budget is used, not hoarded
+
+
+def test_a_cap_of_one_sample_is_the_centred_render(renderer_for):
+    """max_spp = 1: one pixel takes at most one sample, so the result is the
+    1-sample uniform render, one sample everywhere (at commit 9015d6d this
+    raised ZeroDivisionError in AdaptiveSampler.add_samples: an upgrade to
+    FIRST_ROUND clamped to max_spp = 1 traces zero samples, batch = 0)."""
+    r = renderer_for("glass-sphere")
+    res = render_adaptive(r, 48, 27, samples=8, seed=0, max_spp=1)
+    assert np.all(res.spp == 1)
+    assert np.array_equal(res.image, r.render(48, 27, 1))
+
+
+def test_stepping_with_other_renders_in_between_gives_the_same_result(gl, renderer_for):
+    """The viewer advances an AdaptiveRender one draw per frame and draws
+    other things in between: rendering another scene (other programs,
+    framebuffers, blending) between every step must not change the result
+    (bit for bit against render_adaptive)."""
+    r = renderer_for("lit", LIT)
+    other = renderer_for("glass-sphere")
+    w, h = 48, 27
+    expect = render_adaptive(r, w, h, samples=8, seed=2)
+    job = AdaptiveRender(r, w, h, samples=8, seed=2)
+    steps = 0
+    try:
+        while not job.step():
+            other.render(17, 9, 2, seed=1)        # another renderer
+            r.render(20, 11, 1)                   # the same renderer at another size
+            steps += 1
+        got = job.result()
+    finally:
+        job.release()
+    assert steps >= 3
+    assert np.array_equal(got.image, expect.image)
+    assert np.array_equal(got.spp, expect.spp)
+
+
+@pytest.mark.parametrize("layout", ["one-row-per-draw", "small-draws", "wide-list"])
+def test_draw_layout_does_not_change_the_result(gl, renderer_for, monkeypatch, layout):
+    """How the work is cut into draws must not matter: about one fragment
+    per draw (FRAGMENTS_PER_DRAW = 1: one row of the image or of the pixel
+    list at a time), a few rows per draw (600), with 16-pixel renderer
+    tiles, or a pixel list wider than LIST_WIDTH (MAX_LIST_HEIGHT = 2) give
+    the same samples map and the same image as the default layout: each
+    pixel's samples are traced at the same offsets whatever its place in the
+    list or the draw.  The image to 1e-6: a batch of samples cut into more
+    draws is summed in float32 in other groups (measured: up to 6e-8, one
+    unit in the last place); a sample traced at another pixel or offset, or
+    traced twice or not at all, moves edge pixels by 1e-3 or more.  The
+    test checks that the layout really changed (more draws, or a wider
+    list)."""
+    sizes = []
+    spying = hasattr(A.AdaptiveSampler, "_list_target")
+    if spying:
+        original = A.AdaptiveSampler._list_target
+
+        def spy(self, lw, lh):
+            sizes.append((lw, lh))
+            return original(self, lw, lh)
+
+        monkeypatch.setattr(A.AdaptiveSampler, "_list_target", spy)
+
+    def run(renderer):
+        job = AdaptiveRender(renderer, 48, 27, samples=8, seed=4)
+        try:
+            return job.run(), job.draws_done
+        finally:
+            job.release()
+
+    expect, draws = run(renderer_for("lit", LIT))
+    default_sizes, sizes[:] = list(sizes), []
+    if layout == "wide-list":
+        monkeypatch.setattr(A, "MAX_LIST_HEIGHT", 2)
+    else:
+        monkeypatch.setattr(A, "FRAGMENTS_PER_DRAW", 1 if layout == "one-row-per-draw" else 600)
+    other = Renderer(gl, make_scene(LIT), tile=16 if layout != "wide-list" else DEFAULT_TILE)
+    try:
+        got, draws_now = run(other)
+    finally:
+        other.release()
+    if layout == "wide-list":
+        if spying:
+            assert max(lw for lw, _ in default_sizes) == A.LIST_WIDTH
+            assert max(lw for lw, _ in sizes) > A.LIST_WIDTH and max(lh for _, lh in sizes) <= 2
+    else:
+        assert draws_now > draws + 5, (draws, draws_now)      # the work really was cut finer
+    assert np.array_equal(got.spp, expect.spp)
+    np.testing.assert_allclose(got.image, expect.image, atol=1e-6, rtol=0)
+
+
+# ================================================================ command line
+
+
+def glassray(*args, env=None):
+    e = dict(os.environ)
+    e.update(env or {})
+    return subprocess.run([sys.executable, "-m", "viewer", *map(str, args)], capture_output=True, text=True,
+                          env=e, timeout=300)
+
+
+MEAN_LINE = re.compile(r"^render: adaptive, (\d+\.\d\d) samples per pixel on average "
+                       r"\(budget (\d+), target error ([^)]+)\)$", re.M)
+
+
+def test_cli_adaptive_writes_the_image_and_reports_the_mean(renderer_for, tmp_path):
+    """`render glass-sphere --adaptive --samples 16 --size 48x27` writes a
+    (27, 48, 3) float32 .npy and one line 'render: adaptive, M samples per
+    pixel on average (budget 16, target error 0.005)' with M <= 16; M is
+    the mean of the samples map the same command writes with --view samples
+    (same seed: the same render); the image is within RMSE 0.03 of a
+    1024-sample uniform render (measured 0.013).  --target-error alone
+    turns adaptive on; --no-adaptive prints no such line and writes the
+    uniform render."""
+    base = ("render", "glass-sphere", "--size", "48x27", "--samples", "16", "--seed", "2")
+    r = glassray(*base, "--adaptive", "-o", tmp_path / "a.npy")
+    assert r.returncode == 0, r.stderr
+    lines = MEAN_LINE.findall(r.stderr)
+    assert len(lines) == 1, r.stderr
+    mean, budget, target = lines[0]
+    assert budget == "16" and float(target) == 0.005 and float(mean) <= 16
+    img = np.load(tmp_path / "a.npy")
+    assert img.dtype == np.float32 and img.shape == (27, 48, 3)
+    converged = renderer_for("glass-sphere").render(48, 27, 1024, seed=5)
+    assert rmse(img, converged) < 0.03
+
+    r = glassray(*base, "--view", "samples", "-o", tmp_path / "s.npy")
+    assert r.returncode == 0, r.stderr
+    assert abs(np.load(tmp_path / "s.npy")[..., 0].mean() - float(mean)) <= 0.005
+
+    r = glassray(*base, "--target-error", "0.02", "-o", tmp_path / "t.npy")
+    assert r.returncode == 0, r.stderr
+    (mean_t, _, target_t), = MEAN_LINE.findall(r.stderr)
+    assert float(target_t) == 0.02 and float(mean_t) <= 16
+
+    r = glassray(*base, "--no-adaptive", "-o", tmp_path / "u.npy")
+    assert r.returncode == 0, r.stderr
+    assert not MEAN_LINE.search(r.stderr)
+    np.testing.assert_allclose(np.load(tmp_path / "u.npy"),
+                               renderer_for("glass-sphere").render(48, 27, 16, seed=2), atol=1e-6)
+
+
+def test_cli_samples_view_png_and_npy(tmp_path):
+    """`--view samples`: the PNG is the image's width and its height plus
+    the 16-row legend strip (views._legend); the .npy holds the raw samples
+    per pixel, the same value in its 3 channels, >= 1, whole numbers, mean
+    <= the budget, at most MAX_SPP_FACTOR x budget, and more than one
+    count (glass-sphere has edges)."""
+    base = ("render", "glass-sphere", "--size", "48x27", "--samples", "8", "--view", "samples")
+    r = glassray(*base, "-o", tmp_path / "s.png")
+    assert r.returncode == 0, r.stderr
+    png = np.asarray(Image.open(tmp_path / "s.png").convert("RGB"))
+    assert png.shape == (27 + 16, 48, 3)
+    r = glassray(*base, "-o", tmp_path / "s.npy")
+    assert r.returncode == 0, r.stderr
+    raw = np.load(tmp_path / "s.npy")
+    assert raw.shape == (27, 48, 3)
+    assert np.array_equal(raw[..., 0], raw[..., 1]) and np.array_equal(raw[..., 0], raw[..., 2])
+    spp = raw[..., 0]
+    assert np.all(spp >= 1) and np.array_equal(spp, np.round(spp))
+    assert spp.mean() <= 8 and spp.max() <= MAX_SPP_FACTOR * 8
+    assert len(np.unique(spp)) > 1
+    # the picture's one-sample pixels have the legend's low end colour
+    assert np.all(png[:27][spp == 1] == png[-1, 0])
+
+
+def test_cli_samples_view_needs_adaptive(tmp_path):
+    """`--view samples --no-adaptive` is bad usage: exit 2, one message line
+    on stderr, no traceback, nothing written."""
+    r = glassray("render", "-o", tmp_path / "x.png", "--size", "16x16", "--view", "samples", "--no-adaptive")
+    assert r.returncode == 2, r.stderr
+    assert "Traceback" not in r.stderr
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and "adaptive" in lines[0]
+    assert not (tmp_path / "x.png").exists()
+
+
+def test_cli_samples_view_needs_adaptive_even_without_opengl(tmp_path):
+    """Bad usage is exit 2 whatever the machine: with EGL made unusable
+    (no glvnd vendor file), a plain render exits 1 (no context) but
+    `--view samples --no-adaptive` must still exit 2, like an unknown
+    output extension does."""
+    no_gl = {"__EGL_VENDOR_LIBRARY_FILENAMES": str(tmp_path / "none.json")}
+    probe = glassray("render", "-o", tmp_path / "p.png", "--size", "8x8", "--backend", "egl", env=no_gl)
+    if probe.returncode != 1:
+        pytest.skip("cannot make EGL unusable here")
+    assert glassray("render", "-o", tmp_path / "x.txt", "--backend", "egl", env=no_gl).returncode == 2
+    r = glassray("render", "-o", tmp_path / "x.png", "--size", "8x8", "--backend", "egl", "--view", "samples",
+                 "--no-adaptive", env=no_gl)
+    assert r.returncode == 2, r.stderr
+
+
+@pytest.mark.parametrize("value", ["0", "-1", "nan", "abc", "inf", "-0.001"])
+def test_cli_rejects_bad_target_error(tmp_path, value):
+    """--target-error must be a finite number > 0: exit 2, one 'error:' line
+    that names the option and the value, no traceback, nothing written."""
+    r = glassray("render", "-o", tmp_path / "x.png", "--size", "8x8", "--target-error", value)
+    assert r.returncode == 2, r.stderr
+    assert "Traceback" not in r.stderr
+    errors = [ln for ln in r.stderr.splitlines() if "error:" in ln]
+    assert len(errors) == 1, r.stderr
+    assert "--target-error" in errors[0] and repr(value) in errors[0]
+    assert not (tmp_path / "x.png").exists()
+
+
+def test_cli_timing_with_adaptive_prints_the_spec_line(tmp_path):
+    """`--adaptive --timing --repeat 2`: exactly one line
+    `render: <median> ms per frame (median of 2, 32x18, 4 samples)` (the
+    spec's format, median to one decimal), and the image is written."""
+    r = glassray("render", "glass-sphere", "-o", tmp_path / "t.png", "--size", "32x18", "--samples", "4",
+                 "--adaptive", "--timing", "--repeat", "2")
+    assert r.returncode == 0, r.stderr
+    timing = [ln for ln in r.stderr.splitlines() if "ms per frame" in ln]
+    assert len(timing) == 1, r.stderr
+    assert re.fullmatch(r"render: \d+\.\d ms per frame \(median of 2, 32x18, 4 samples\)", timing[0]), timing
+    assert len(MEAN_LINE.findall(r.stderr)) == 1
+    png = np.asarray(Image.open(tmp_path / "t.png"))
+    assert png.shape == (18, 32, 3)
