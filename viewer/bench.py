@@ -359,8 +359,27 @@ def reference_image(scene, stem: str, width: int, height: int, samples: int, cac
 # ---------------------------------------------------------------- measuring
 
 
+class Timings:
+    """Median wall-clock and CPU time of the repeated renders in ``times`` and
+    ``cpu_times`` (ms); ``t(clock)`` picks one (the bench and its peer)."""
+
+    times: list[float]
+    cpu_times: list[float]
+
+    @property
+    def time_ms(self) -> float:
+        return statistics.median(self.times)
+
+    @property
+    def cpu_ms(self) -> float:
+        return statistics.median(self.cpu_times)
+
+    def t(self, clock: str) -> float:
+        return self.cpu_ms if clock == "cpu" else self.time_ms
+
+
 @dataclass
-class Result:
+class Result(Timings):
     scene: str
     setting: Setting
     width: int
@@ -378,16 +397,6 @@ class Result:
     def spp_used(self) -> float:
         return float(self.setting.samples) if self.mean_spp is None else self.mean_spp
 
-    @property
-    def time_ms(self) -> float:
-        return statistics.median(self.times)
-
-    @property
-    def cpu_ms(self) -> float:
-        return statistics.median(self.cpu_times)
-
-    def t(self, clock: str) -> float:
-        return self.cpu_ms if clock == "cpu" else self.time_ms
 
 
 class _Renderers:

@@ -55,6 +55,7 @@ import time
 
 import numpy as np
 
+from .bench import Timings
 from .scene import Material, Scene, SceneObject
 
 __all__ = ["PeerError", "PEERS", "reasons", "check_scene", "select_variant", "scene_dict", "MitsubaPeer",
@@ -545,8 +546,8 @@ TTE_CSV_COLUMNS = ("target_rmse", "clock", "glassray_ms", "mitsuba_ms", "ratio_m
                    "glassray_adaptive_ms", "ratio_mitsuba_over_adaptive")
 
 
-class Point:
-    """One measured point of a series."""
+class Point(Timings):
+    """One measured point of a series (its medians: bench.Timings)."""
 
     def __init__(self, series: str, label: str, samples: int, run):
         self.series, self.label, self.samples, self.run = series, label, samples, run
@@ -554,21 +555,6 @@ class Point:
         self.times: list[float] = []
         self.cpu_times: list[float] = []
         self.errors: dict[str, float] = {}
-
-    @property
-    def time_ms(self) -> float:
-        import statistics
-
-        return statistics.median(self.times)
-
-    @property
-    def cpu_ms(self) -> float:
-        import statistics
-
-        return statistics.median(self.cpu_times)
-
-    def t(self, clock: str) -> float:
-        return self.cpu_ms if clock == "cpu" else self.time_ms
 
 
 def time_to_error(points: list[Point], target: float, clock: str = "wall") -> tuple[float | None, str]:
