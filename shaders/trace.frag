@@ -442,24 +442,27 @@ vec4 firstHit(vec3 o, vec3 d) {
 }
 #endif
 
+// The camera ray through offset (u, v) of pixel (i, j): i to the right, j
+// downward from the top row (the spec's pinhole model).
+vec3 cameraRay(vec2 ij, vec2 offset) {
+    vec2 uv = (ij + offset) / imageSize;
+    return normalize(camForward + (2.0 * uv.x - 1.0) * camRight + (1.0 - 2.0 * uv.y) * camUp);
+}
+
 void main() {
-    // Pixel (i, j): i to the right, j downward from the top row.
 #ifdef ADAPTIVE_LIST
     ivec2 listed = texelFetch(pixelList, ivec2(gl_FragCoord.xy), 0).xy;
     fragColor = vec4(0.0);
     fragMoments = vec4(0.0);
     if (listed.x < 0) return;
     for (int b = 0; b < batchSize; ++b) {
-        vec2 uvb = (vec2(listed) + batchOffsets[b]) / imageSize;
-        vec3 dirb = normalize(camForward + (2.0 * uvb.x - 1.0) * camRight + (1.0 - 2.0 * uvb.y) * camUp);
-        vec3 Lb = radiance(vec3(0.0), dirb) * params.w;
+        vec3 Lb = radiance(vec3(0.0), cameraRay(vec2(listed), batchOffsets[b])) * params.w;
         fragColor += vec4(Lb, 1.0);
         fragMoments += vec4(float((firstSample + b) & 1) * Lb, dot(Lb, Lb));
     }
 #else
     vec2 ij = vec2(floor(gl_FragCoord.x), imageSize.y - 1.0 - floor(gl_FragCoord.y));
-    vec2 uv = (ij + sampleOffset) / imageSize;
-    vec3 dir = normalize(camForward + (2.0 * uv.x - 1.0) * camRight + (1.0 - 2.0 * uv.y) * camUp);
+    vec3 dir = cameraRay(ij, sampleOffset);
 #if defined(VIEW_MODE) && VIEW_MODE == 3
     radiance(vec3(0.0), dir);
     fragColor = vec4(float(rayCount), 0.0, 0.0, 1.0);

@@ -131,7 +131,7 @@ def test_random_cameras_and_lights_give_the_same_image(gl, az, el, dist, lx, lz,
 def test_merge_keeps_supersets_and_the_limit():
     labels = np.array([[0, 1, 2], [3, 4, 0]])
     subsets = [(0,), (0, 1), (0, 2), (0, 1, 2, 3), (4,)]
-    new_labels, merged = culling.merge_subsets(labels, subsets, 5, max_variants=2)
+    new_labels, merged = culling.merge_subsets(labels, subsets, max_variants=2)
     assert len(merged) <= 2
     for old, new in zip(labels.ravel(), new_labels.ravel()):
         assert set(subsets[old]) <= set(merged[new])      # a tile only ever gains objects

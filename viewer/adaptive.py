@@ -216,24 +216,32 @@ def pixel_error(sums: Sums) -> np.ndarray:
     return np.maximum(half_error(sums), standard_error(sums))
 
 
-def sliver_error(contrast: np.ndarray, n: int) -> np.ndarray:
+def sliver_error(contrast: np.ndarray, n) -> np.ndarray:
     """What n samples that all agree may still miss: an edge of contrast C
-    (the neighbourhood's, from round 0) whose sliver inside the pixel falls
-    between them, about 1/n of the pixel at most, SLIVER x C / n on
-    average.  Without this a pixel next to an edge stops as soon as its
-    samples agree, and those pixels carried most of the error left."""
-    return SLIVER * contrast / n
+    (the neighbourhood's, from the first pass) whose sliver inside the pixel
+    falls between them, about 1/n of the pixel at most, SLIVER x C / n.
+    Without this a pixel next to an edge stops as soon as its samples
+    agree."""
+    return SLIVER * contrast / np.maximum(n, 1)
+
+
+def own_error(sums: Sums, contrast: np.ndarray) -> np.ndarray:
+    """A pixel's error estimate from its own samples (pixel_error) and from
+    what they may have missed (sliver_error)."""
+    return np.maximum(pixel_error(sums), sliver_error(contrast, sums.count))
+
+
+def with_neighbours(own: np.ndarray) -> np.ndarray:
+    """At least NEIGHBOUR_SHARE of the worst neighbour's error: errors lie
+    along edges, so a pixel whose few samples happen to agree beside one
+    that disagrees is not done."""
+    return np.maximum(own, NEIGHBOUR_SHARE * _neighbourhood(own, np.maximum))
 
 
 def estimated_error(sums: Sums, contrast: np.ndarray) -> np.ndarray:
-    """(H, W): what a pixel's mean is estimated to be off by: its own
-    samples' estimate (pixel_error), at least what they may have missed
-    (sliver_error), and at least half of its worst neighbour's (errors lie
-    along edges: a pixel whose few samples happen to agree beside one that
-    disagrees is not done)."""
-    n = np.maximum(sums.count, 1)
-    own = np.maximum(pixel_error(sums), SLIVER * contrast / n)
-    return np.maximum(own, NEIGHBOUR_SHARE * _neighbourhood(own, np.maximum))
+    """(H, W): what a pixel's mean is estimated to be off by (what the
+    render's rounds rank pixels by)."""
+    return with_neighbours(own_error(sums, contrast))
 
 
 def choose_by_gain(want: np.ndarray, error: np.ndarray, count: np.ndarray, left: int,
@@ -521,22 +529,14 @@ class AdaptiveRender:
         w, h = self.width, self.height
         renderer = self.sampler.renderer
 
-        gen = self.sampler.first_pass((0.5, 0.5))
-        while True:
-            try:
-                next(gen)
-            except StopIteration as stop:
-                sums, t, obj, normal = stop.value
-                break
-            self.draws_done += 1
-            yield
+        sums, t, obj, normal = yield from self._draws(self.sampler.first_pass((0.5, 0.5)))
         self.total[...] = sums.total
         self.moments[...] = sums.moments
         self.spent = w * h
         self.rounds.append((1, w * h))
         contrast = colour_contrast(sums.mean)
-        self._contrast = contrast.astype(np.float32)
-        self._own = (SLIVER * self._contrast).astype(np.float32)   # one sample: no spread known yet
+        self._contrast = contrast
+        self._own = own_error(sums, contrast)   # one sample: the sliver term only
         flagged = contrast > max(self.target_error, FLAG_CONTRAST)
         # An edge of the first interaction or an aliasing checker counts as
         # an error of EDGE_ERROR until the pixel's samples say otherwise: a
@@ -553,11 +553,11 @@ class AdaptiveRender:
         chosen = choose_within_budget(flagged, contrast, FIRST_ROUND - 1, self.budget - self.spent)
         yield from self._upgrade(chosen)
         # Then, round by round, the pixels whose estimated error is above the
-        # target and largest for its cost take 4x their samples, until the
+        # target and largest for its cost double their samples, until the
         # budget is spent.  A pixel that is not flagged keeps one sample.
         while True:
             count = self.total[..., 3]
-            error = np.maximum(self._own, NEIGHBOUR_SHARE * _neighbourhood(self._own, np.maximum))
+            error = with_neighbours(self._own)       # estimated_error, own part kept up to date
             want = flagged & (error > self.target_error) & (count * ROUND_FACTOR <= self.max_spp)
             left = self.budget - self.spent
             chosen = choose_by_gain(want, error, count, left, ROUND_SHARE)
@@ -566,19 +566,13 @@ class AdaptiveRender:
             yield from self._upgrade(chosen)
 
     def _refresh_own(self, flat: np.ndarray) -> None:
-        """A pixel's own error estimate (estimated_error before the
-        neighbours' share), for the pixels just sampled."""
-        tot = self.total.reshape(-1, 4)[flat]
-        mom = self.moments.reshape(-1, 4)[flat]
-        sums = Sums(tot[:, None], mom[:, None])
-        n = np.maximum(tot[:, 3], 1)
-        own = np.maximum(pixel_error(sums)[:, 0], SLIVER * self._contrast.ravel()[flat] / n)
-        self._own.ravel()[flat] = own
+        """own_error of the pixels just sampled (the others are unchanged)."""
+        sums = Sums(self.total.reshape(-1, 4)[flat][:, None], self.moments.reshape(-1, 4)[flat][:, None])
+        self._own.ravel()[flat] = own_error(sums, self._contrast.ravel()[flat][:, None])[:, 0]
 
     def _upgrade(self, chosen: np.ndarray):
-        """Take every chosen pixel from n to ROUND_FACTOR x n samples (n =
-        FIRST_ROUND / ROUND_FACTOR... for pixels at one sample: to
-        FIRST_ROUND), one list per current count."""
+        """Take every chosen pixel from n to ROUND_FACTOR x n samples (from
+        one sample: to FIRST_ROUND), one pixel list per current count."""
         count = np.rint(self.total[..., 3]).astype(np.int64).ravel()
         flat_all = np.flatnonzero(chosen.ravel())
         if len(flat_all) == 0:
@@ -590,19 +584,20 @@ class AdaptiveRender:
             yield from self._add(flat, int(n), n_next)
             self.rounds.append((n_next, len(flat)))
 
-    def _add(self, flat: np.ndarray, n_prev: int, n: int):
-        """Samples n_prev .. n - 1 of the pixels `flat` (all at n_prev)."""
-        drawn = 0
-        gen = self.sampler.add_samples(flat, self.offsets[n_prev:n], n_prev)
+    def _draws(self, gen):
+        """Run one of the sampler's generators, counting its draw calls (one
+        per yield); returns what it returns."""
         while True:
             try:
                 next(gen)
             except StopIteration as stop:
-                tot, mom = stop.value
-                break
+                return stop.value
             self.draws_done += 1
-            drawn += 1
             yield
+
+    def _add(self, flat: np.ndarray, n_prev: int, n: int):
+        """Samples n_prev .. n - 1 of the pixels `flat` (all at n_prev)."""
+        tot, mom = yield from self._draws(self.sampler.add_samples(flat, self.offsets[n_prev:n], n_prev))
         self.total.reshape(-1, 4)[flat] += tot
         self.moments.reshape(-1, 4)[flat] += mom
         self.spent += len(flat) * (n - n_prev)

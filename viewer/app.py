@@ -644,8 +644,7 @@ class Viewer:
             size = (max(1, round(fbw * sc)), max(1, round(fbh * sc)))
         from .views import raw_view
 
-        with _releasing_attachments(self.ctx):
-            raw = raw_view(self.renderer, self.controls.view, *size)
+        raw = raw_view(self.renderer, self.controls.view, *size)   # into the renderer's kept target
         pic = window_picture(self.controls.view, raw, fbw, fbh)
         if self.debug_tex is None or self.debug_tex.size != (fbw, fbh):
             self._release_debug()
@@ -938,36 +937,6 @@ class Viewer:
 def help_text() -> str:
     width = max(len(k) for k, _ in HELP_ALL)
     return "\n".join(f"  {k:<{width}}  {v.replace('`', '')}" for k, v in HELP_ALL)
-
-
-class _releasing_attachments:
-    """While active, framebuffers made with ``ctx.simple_framebuffer`` get
-    their renderbuffers released afterwards: ``Framebuffer.release`` leaves
-    them, and the renderer's debug passes make one per call (a leak of two
-    renderbuffers per debug picture in a long viewer session)."""
-
-    def __init__(self, ctx):
-        self.ctx = ctx
-        self.made: list = []
-
-    def __enter__(self):
-        orig = type(self.ctx).simple_framebuffer.__get__(self.ctx)
-
-        def simple(*a, **k):
-            fbo = orig(*a, **k)
-            self.made.extend((*fbo.color_attachments, fbo.depth_attachment))
-            return fbo
-
-        self.ctx.simple_framebuffer = simple
-        return self
-
-    def __exit__(self, *exc):
-        del self.ctx.simple_framebuffer
-        for att in self.made:
-            if att is not None:
-                att.release()
-        self.made.clear()
-        return False
 
 
 def window_picture(view: str, raw: np.ndarray, width: int, height: int) -> np.ndarray:

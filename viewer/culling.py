@@ -57,7 +57,6 @@ class CullPlan:
     (sorted object indices) with its scissor rectangles (x, y, w, h) in
     framebuffer pixels, y up from the bottom row."""
     groups: tuple[tuple[tuple[int, ...], tuple[tuple[int, int, int, int], ...]], ...]
-    tiles: tuple[int, int]
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -171,7 +170,7 @@ def tile_subsets(scene: Scene, width: int, height: int, tile: int = TILE) -> tup
     return labels, subsets
 
 
-def merge_subsets(labels: np.ndarray, subsets: list[tuple[int, ...]], n_objects: int,
+def merge_subsets(labels: np.ndarray, subsets: list[tuple[int, ...]],
                   max_variants: int = MAX_VARIANTS) -> tuple[np.ndarray, list[tuple[int, ...]]]:
     """At most max_variants subsets: repeatedly the group with the fewest
     tiles joins the group whose subset its own adds the fewest objects to
@@ -228,13 +227,13 @@ def rectangles(mask: np.ndarray, tile: int, width: int, height: int) -> list[tup
 
 def plan(scene: Scene, width: int, height: int, tile: int = TILE, max_variants: int = MAX_VARIANTS) -> CullPlan:
     labels, subsets = tile_subsets(scene, width, height, tile)
-    labels, subsets = merge_subsets(labels, subsets, len(scene.objects), max_variants)
+    labels, subsets = merge_subsets(labels, subsets, max_variants)
     groups = []
     for g, subset in enumerate(subsets):
         rects = rectangles(labels == g, tile, width, height)
         if rects:
             groups.append((subset, tuple(rects)))
-    return CullPlan(tuple(groups), labels.shape[::-1])
+    return CullPlan(tuple(groups))
 
 
 def plan_key(scene: Scene, width: int, height: int) -> tuple:

@@ -609,14 +609,6 @@ def _fmt_ratio(r: tuple[float | None, str]) -> str:
     return f"{pre}{v:.2f}x" if v < 10 else f"{pre}{v:.0f}x"
 
 
-def _adaptive():
-    try:
-        from .adaptive import render_adaptive
-    except ImportError:
-        return None
-    return render_adaptive
-
-
 def _series_table(series: dict[str, list[Point]]) -> str:
     head = ("series", "point", "spp (effective)", "ms (median)", "min..max", "CPU ms", "RMSE", ">1/255",
             "max err")
@@ -758,8 +750,9 @@ def run_bench(args, ctx, backend: str, name: str, scene, width: int, height: int
     ref, kind, cached = bench.reference_image(scene, stem, width, height, ref_samples, out, ctx=ctx, log=log)
     log(f"reference {'from the cache' if cached else f'took {time.perf_counter() - t0:.1f} s'}")
 
+    from .adaptive import render_adaptive
+
     renderer = Renderer(ctx, scene)
-    render_adaptive = _adaptive()
     series: dict[str, list[Point]] = {"glassray": [], "mitsuba": []}
 
     def gl_run(n):
@@ -774,11 +767,8 @@ def run_bench(args, ctx, backend: str, name: str, scene, width: int, height: int
     try:
         for n in g_spp:
             series["glassray"].append(Point("glassray", f"{n}", n, gl_run(n)))
-        if render_adaptive is not None:
-            series["glassray adaptive"] = [Point("glassray adaptive", f"e{e:g}", ADAPTIVE_BUDGET, ad_run(e))
-                                           for e in a_targets]
-        else:
-            log("viewer.adaptive is not importable: no adaptive series")
+        series["glassray adaptive"] = [Point("glassray adaptive", f"e{e:g}", ADAPTIVE_BUDGET, ad_run(e))
+                                       for e in a_targets]
         # untimed first renders: the images compared, kernels compiled
         for sname, pts in list(series.items()):
             if sname == "mitsuba":

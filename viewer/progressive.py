@@ -10,7 +10,7 @@ framebuffers and shows the result in whatever framebuffer it is given.
   time budget, so one slow sample never blocks the event loop; sample k uses
   offset k of ``sample_offsets(samples, seed)``, the same pattern as
   ``glassray render``, so a finished accumulation equals the offscreen image.
-* Adaptive accumulation (``adaptive=True``, the viewer's default): instead
+* Adaptive accumulation (``adaptive=True``; the viewer's --adaptive): instead
   of uniform passes, an :class:`~viewer.adaptive.AdaptiveRender` for the
   full framebuffer size, advanced one draw call (``step``) at a time within
   the same frame-time budget; its first step traces sample 0 of every pixel,

@@ -10,7 +10,6 @@ trip a GPU driver's watchdog.
 
 from __future__ import annotations
 
-import time
 from typing import Callable
 
 import moderngl
@@ -90,8 +89,12 @@ class Renderer:
         self._update_sky(scene)
         self.scene = scene
 
+    @staticmethod
+    def _program_key(defines: dict, vertex: str = "fullscreen.vert") -> tuple:
+        return (vertex, *sorted(defines.items()))
+
     def _program(self, defines: dict, vertex: str = "fullscreen.vert") -> moderngl.Program:
-        key = (vertex, *sorted(defines.items()))
+        key = self._program_key(defines, vertex)
         prog = self._programs.get(key)
         if prog is None:
             prog = build_program(self.ctx, vertex=vertex, defines=defines)
@@ -170,7 +173,7 @@ class Renderer:
                 prog = self._main
                 if subset != everything:
                     defines = {**shader_defines(self.scene, True, self.fresnel, subset), **self.extra_defines}
-                    k = ("fullscreen.vert", *sorted(defines.items()))
+                    k = self._program_key(defines)
                     if k in self._subset_programs or compiled < self.COMPILES_PER_DRAW:
                         compiled += k not in self._subset_programs
                         prog = self._subset_program(k, defines)
@@ -315,18 +318,6 @@ class Renderer:
         finally:
             self.program = main
         return np.frombuffer(raw, np.float32).reshape(height, width, 4)[::-1]
-
-    def time_render(self, width: int, height: int, samples: int, repeat: int, seed: int = 0) -> list[float]:
-        """Wall-clock ms of `repeat` renders after one warm-up, each finished
-        on the GPU (the read-back waits for it) before its clock stops."""
-        self.render(width, height, samples, seed)
-        times = []
-        for _ in range(repeat):
-            t0 = time.perf_counter()
-            self.render(width, height, samples, seed)
-            self.ctx.finish()
-            times.append((time.perf_counter() - t0) * 1000.0)
-        return times
 
     def release(self) -> None:
         self._release_target()
