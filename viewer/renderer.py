@@ -32,7 +32,7 @@ DEFAULT_TILE = 512
 CULL_MAX_OBJECTS = 24
 
 
-def _intersect(a: tuple[int, int, int, int], b: tuple[int, int, int, int]) -> tuple[int, int, int, int] | None:
+def intersect_rect(a: tuple[int, int, int, int], b: tuple[int, int, int, int]) -> tuple[int, int, int, int] | None:
     x0, y0 = max(a[0], b[0]), max(a[1], b[1])
     x1, y1 = min(a[0] + a[2], b[0] + b[2]), min(a[1] + a[3], b[1] + b[3])
     return (x0, y0, x1 - x0, y1 - y0) if x1 > x0 and y1 > y0 else None
@@ -59,7 +59,8 @@ class Renderer:
         self.extra_defines = dict(extra_defines or {})
         self._programs: dict[tuple, moderngl.Program] = {}
         self._subset_programs: dict[tuple, moderngl.Program] = {}
-        self._plan = None
+        self._plans: dict[tuple, list] = {}
+        self._plan_key = None
         self._vao_for: dict[int, moderngl.VertexArray] = {}
         self._ubo: moderngl.Buffer | None = None
         self._sky: moderngl.Texture | None = None
@@ -79,7 +80,7 @@ class Renderer:
         packed = pack_scene(scene, self.specialise, self.fresnel)
         self._defines = {**packed.defines, **self.extra_defines}
         self.program = self._main = self._program(self._defines)
-        self._plan_key = self._plan = None
+        self._plan_key, self._plans = None, {}
         if self._ubo is None or self._ubo.size != len(packed.block):
             if self._ubo is not None:
                 self._ubo.release()
@@ -123,7 +124,7 @@ class Renderer:
         self._sky, self._sky_path = tex, path
 
     def _vao(self) -> moderngl.VertexArray:
-        return self._vao_of(self.program)
+        return self.vao_of(self.program)
 
     # ------------------------------------------------------------ drawing
 
@@ -134,13 +135,12 @@ class Renderer:
         in framebuffer pixels, bottom-left origin.  The specialised shader
         draws each group of screen tiles with a variant compiled for the
         objects its rays can meet (viewer/culling.py); the image is the same."""
-        if (self.cull and self.specialise and self.program is self._main
-                and 0 < len(self.scene.objects) <= CULL_MAX_OBJECTS):
+        if self.program is self._main and self.culls():
             for prog, rects in self._culled(width, height):
                 self.bind(prog, width, height, offset)
-                vao = self._vao_of(prog)
+                vao = self.vao_of(prog)
                 for rect in rects:
-                    clipped = rect if viewport is None else _intersect(rect, viewport)
+                    clipped = rect if viewport is None else intersect_rect(rect, viewport)
                     if clipped is None:
                         continue
                     self.ctx.scissor = clipped
@@ -152,38 +152,62 @@ class Renderer:
         self._vao().render(moderngl.TRIANGLES, vertices=3)
         self.ctx.scissor = None
 
-    def _culled(self, width: int, height: int) -> list[tuple[moderngl.Program, tuple]]:
-        """The culling plan of this camera and size, its programs compiled."""
+    def culls(self) -> bool:
+        """Whether images are drawn per group of screen tiles (culling)."""
+        return self.cull and self.specialise and 0 < len(self.scene.objects) <= CULL_MAX_OBJECTS
+
+    def programs_for(self, width: int, height: int, compile_all: bool = False,
+                     **defines) -> list[tuple[moderngl.Program, tuple]]:
+        """(program, scissor rectangles) pairs that together cover a width x
+        height image exactly once: the culling variants of the scene's
+        program with `defines` added (the adaptive sampler's ADAPTIVE
+        variants), or that one program over the whole image when the scene
+        is not culled.  Every variant draws the same image as the full one
+        (tests/test_culling.py), so which of them a pixel gets, or whether a
+        variant is ready yet, never changes a result.  Variants compile
+        COMPILES_PER_DRAW per call, or all of them now with compile_all."""
+        if not self.culls():
+            return [(self.variant(**defines) if defines else self._main, ((0, 0, width, height),))]
+        return self._culled(width, height, defines, compile_all)
+
+    def _culled(self, width: int, height: int, extra: dict | None = None,
+                compile_all: bool = False) -> list[tuple[moderngl.Program, tuple]]:
+        """The culling plan of this camera and size, its programs (with the
+        `extra` defines) compiled."""
         from . import culling
         from .gpu_scene import shader_defines
 
+        extra = dict(extra or {})
         key = culling.plan_key(self.scene, width, height)
         if key != self._plan_key:
             self._plan_key = key
             self._plan_groups = culling.plan(self.scene, width, height).groups
-            self._plan = None
-        if self._plan is None:
-            # Compile at most COMPILES_PER_DRAW new variants per call (a
-            # compile costs up to seconds on llvmpipe); until its variant is
-            # ready a group is drawn with the scene's full shader, which is
-            # exact everywhere.
-            everything = tuple(range(len(self.scene.objects)))
-            compiled, complete, progs = 0, True, []
-            for subset, rects in self._plan_groups:
-                prog = self._main
-                if subset != everything:
-                    defines = {**shader_defines(self.scene, True, self.fresnel, subset), **self.extra_defines}
-                    k = self._program_key(defines)
-                    if k in self._subset_programs or compiled < self.COMPILES_PER_DRAW:
-                        compiled += k not in self._subset_programs
-                        prog = self._subset_program(k, defines)
-                    else:
-                        complete = False
-                progs.append((prog, rects))
-            if complete:
-                self._plan = progs
-            return progs
-        return self._plan
+            self._plans = {}
+        extra_key = tuple(sorted(extra.items()))
+        done = self._plans.get(extra_key)
+        if done is not None:
+            return done
+        # Compile at most COMPILES_PER_DRAW new variants per call (a compile
+        # costs up to seconds on llvmpipe); until its variant is ready a
+        # group is drawn with the scene's full shader, which is exact
+        # everywhere.
+        full = self.variant(**extra) if extra else self._main
+        everything = tuple(range(len(self.scene.objects)))
+        compiled, complete, progs = 0, True, []
+        for subset, rects in self._plan_groups:
+            prog = full
+            if subset != everything:
+                defines = {**shader_defines(self.scene, True, self.fresnel, subset), **self.extra_defines, **extra}
+                k = self._program_key(defines)
+                if k in self._subset_programs or compile_all or compiled < self.COMPILES_PER_DRAW:
+                    compiled += k not in self._subset_programs
+                    prog = self._subset_program(k, defines)
+                else:
+                    complete = False
+            progs.append((prog, rects))
+        if complete:
+            self._plans[extra_key] = progs
+        return progs
 
     def _subset_program(self, key: tuple, defines: dict) -> moderngl.Program:
         """A culling variant, from a cache of the SUBSET_PROGRAMS most
@@ -193,7 +217,7 @@ class Renderer:
         if prog is None:
             prog = build_program(self.ctx, defines=defines)
         self._subset_programs[key] = prog          # most recent last
-        in_use = {id(p) for p, _ in (self._plan or ())}
+        in_use = {id(p) for plan in self._plans.values() for p, _ in plan}
         while len(self._subset_programs) > self.SUBSET_PROGRAMS:
             old_key = next(k for k, p in self._subset_programs.items() if id(p) not in in_use and k != key)
             old = self._subset_programs.pop(old_key)
@@ -203,7 +227,7 @@ class Renderer:
             old.release()
         return prog
 
-    def _vao_of(self, prog: moderngl.Program) -> moderngl.VertexArray:
+    def vao_of(self, prog: moderngl.Program) -> moderngl.VertexArray:
         vao = self._vao_for.get(id(prog))
         if vao is None:
             vao = self.ctx.vertex_array(prog, [])
