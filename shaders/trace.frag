@@ -21,35 +21,32 @@ uniform vec3 camUp;            // up * tan(fov/2)
 out vec4 fragColor;
 
 #ifdef ADAPTIVE
-// Adaptive sampling (viewer/adaptive.py).  Every sample writes (L, 1) to
-// attachment 0 and (sampleParity * L, L.L) to attachment 1, so that the
-// sums give each pixel's mean, the mean of its odd-index samples and a
-// spread.  ADAPTIVE_LIST: fragment (x, y) of a small framebuffer traces the
-// image pixel (i, j) stored at (x, y) of pixelList (i < 0: padding, nothing
-// traced), so only the pixels that still need samples are drawn and every
-// SIMD lane does useful work.  ADAPTIVE_FIRST: the whole image, plus the
-// first interaction of each camera ray in attachments 2 and 3.
-uniform float sampleParity;
+// Adaptive sampling (viewer/adaptive.py).  Every sample adds (L, 1) to
+// attachment 0 and (L.L, 0, 0, 0) to attachment 1, so that the sums give
+// each pixel's mean and spread.  ADAPTIVE_LIST: fragment (x, y) of a small
+// framebuffer traces samples of the image pixel (i, j) stored at (x, y) of
+// pixelList with its first sample index s0 and count n (i < 0: padding,
+// nothing traced): samples s0 + chunkStart .. s0 + min(n, chunkStart +
+// chunkSize) - 1, at the offsets stored at texel (sample, 0) of
+// sampleOffsets.  So only the pixels that still need samples are drawn and
+// every SIMD lane does useful work.  ADAPTIVE_FIRST: the whole image (or
+// the grid of pixel corners), plus the first interaction of each camera
+// ray in attachment 2.
 layout(location = 1) out vec4 fragMoments;
 #ifdef ADAPTIVE_LIST
 uniform isampler2D pixelList;
-// A batch of samples per draw (fewer draw calls): samples firstSample ..
-// firstSample + batchSize - 1 at these offsets; parity from their index.
-#define MAX_BATCH 32
-uniform int batchSize;
-uniform int firstSample;
-uniform vec2 batchOffsets[MAX_BATCH];
+uniform sampler2D sampleOffsets;
+uniform int chunkStart;
+uniform int chunkSize;
 #endif
 #ifdef ADAPTIVE_FIRST
 layout(location = 2) out vec4 fragFirstHit;     // (t, object index, 0, 0); (INF, -1) for the sky
-layout(location = 3) out vec4 fragFirstNormal;  // unit outward normal, 0 for the sky
 #endif
 #endif
 #ifdef ADAPTIVE_FIRST
 float firstT = INF;
 int firstObject = -1;
-vec3 firstN = vec3(0.0);
-#define RECORD_FIRST(br, it) if (br.depth == 1) { firstT = length(it.p - br.o); firstObject = it.object; firstN = it.n; }
+#define RECORD_FIRST(br, it) if (br.depth == 1) { firstT = length(it.p - br.o); firstObject = it.object; }
 #else
 #define RECORD_FIRST(br, it)
 #endif
@@ -451,14 +448,16 @@ vec3 cameraRay(vec2 ij, vec2 offset) {
 
 void main() {
 #ifdef ADAPTIVE_LIST
-    ivec2 listed = texelFetch(pixelList, ivec2(gl_FragCoord.xy), 0).xy;
+    ivec4 listed = texelFetch(pixelList, ivec2(gl_FragCoord.xy), 0);
     fragColor = vec4(0.0);
     fragMoments = vec4(0.0);
     if (listed.x < 0) return;
-    for (int b = 0; b < batchSize; ++b) {
-        vec3 Lb = radiance(vec3(0.0), cameraRay(vec2(listed), batchOffsets[b])) * params.w;
+    int end = min(listed.w, chunkStart + chunkSize);
+    for (int b = chunkStart; b < end; ++b) {
+        vec2 offset = texelFetch(sampleOffsets, ivec2(listed.z + b, 0), 0).xy;
+        vec3 Lb = radiance(vec3(0.0), cameraRay(vec2(listed.xy), offset)) * params.w;
         fragColor += vec4(Lb, 1.0);
-        fragMoments += vec4(float((firstSample + b) & 1) * Lb, dot(Lb, Lb));
+        fragMoments.x += dot(Lb, Lb);
     }
 #else
     vec2 ij = vec2(floor(gl_FragCoord.x), imageSize.y - 1.0 - floor(gl_FragCoord.y));
@@ -472,11 +471,10 @@ void main() {
     vec3 L = radiance(vec3(0.0), dir) * params.w;
     fragColor = vec4(L, 1.0);
 #ifdef ADAPTIVE
-    fragMoments = vec4(sampleParity * L, dot(L, L));
+    fragMoments = vec4(dot(L, L), 0.0, 0.0, 0.0);
 #endif
 #ifdef ADAPTIVE_FIRST
     fragFirstHit = vec4(firstT, float(firstObject), 0.0, 0.0);
-    fragFirstNormal = vec4(firstN, 0.0);
 #endif
 #endif
 #endif  // ADAPTIVE_LIST

@@ -286,7 +286,7 @@ def test_a_restart_releases_the_adaptive_render_and_starts_over(adaptive_setup):
         r.set_scene(scene)
         p.restart()
         assert p.job is None and old.done and p.mean_spp == 0.0 and not p.started
-        assert old.sampler._list_tex is None and not old.sampler._vaos
+        assert old.sampler._list_tex is None and not old.sampler._mrt and old.sampler._offsets_tex is None
         assert _gl_counts(gl) == base  # nothing of the old render is left
     assert p._uploaded_spent == 0 and not accum_mean(p)[1].any()
     # the new view from the start: the offscreen adaptive render of the new camera

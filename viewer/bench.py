@@ -122,17 +122,18 @@ class Setting:
                 self.adaptive)
 
 
+from .adaptive import DEFAULT_TARGET_ERROR  # noqa: E402  (no GL at import: the module creates no context)
+
 #: Adaptive points of the full sweep: (target error, budget as a multiple of
-#: the scene's samples).  Measured at 320x180 on default and glass-sphere (16
-#: samples): 0.05 stops early (about 9-11 mean samples at a budget of 16, and
-#: a larger budget changes neither its time nor its error much), 0.02 and
-#: 0.005 spend the whole budget, 0.005 with the lower error; 0.001 gave
-#: nearly the images of 0.005, more slowly.  Budgets 2x and 4x show what the
-#: default target reaches with more samples to spend; the uniform sweep gets
-#: a setting at every adaptive budget, so each has its uniform counterpart.
-ADAPTIVE_SWEEP = ((0.05, 1), (0.02, 1), (0.005, 1), (0.005, 2), (0.005, 4))
+#: the scene's samples).  0.05 and 0.01 stop before the budget on some
+#: scenes; the default target (viewer.adaptive.DEFAULT_TARGET_ERROR) spends
+#: it, at 1x, 2x and 4x the scene's samples: what adaptive sampling reaches
+#: with more samples to spend.  The uniform sweep gets a setting at every
+#: adaptive budget, so each has its uniform counterpart.
+ADAPTIVE_SWEEP = ((0.05, 1), (0.01, 1), (DEFAULT_TARGET_ERROR, 1), (DEFAULT_TARGET_ERROR, 2),
+                  (DEFAULT_TARGET_ERROR, 4))
 #: --quick: one adaptive point, the default target at the scene's samples.
-QUICK_ADAPTIVE_SWEEP = ((0.005, 1),)
+QUICK_ADAPTIVE_SWEEP = ((DEFAULT_TARGET_ERROR, 1),)
 
 
 def adaptive_label(target: float, samples: int) -> str:

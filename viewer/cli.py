@@ -110,6 +110,8 @@ def _add_overrides(p: argparse.ArgumentParser) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from .adaptive import DEFAULT_TARGET_ERROR     # (no GL: the module creates no context)
+
     parser = argparse.ArgumentParser(
         prog="glassray",
         description="A real-time Whitted ray tracer: a rod in a glass of liquid, traced in a fragment shader.",
@@ -156,7 +158,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "default; on when --target-error is given)")
     r.add_argument("--target-error", type=_float_range(0.0, 1e9, lo_open=True), metavar="E",
                    help="adaptive sampling's per-pixel error target, linear radiance on the largest channel "
-                        "(default 0.005)")
+                        f"(default {DEFAULT_TARGET_ERROR:g})")
     r.add_argument("--max-error", type=_max_error, metavar="E",
                    help="use the fastest settings (samples, max depth, min weight) whose measured RMSE "
                         "(linear) against a converged reference is at most E; measured once per scene, size "

@@ -66,6 +66,7 @@ class Progressive:
         self._adaptive = bool(adaptive)
         self.job: AdaptiveRender | None = None
         self._uploaded_spent = 0
+        self._uploaded_mean = 0.0
         self._step_s = 0.0  # duration of the latest adaptive step (predicts the next one)
         self.uploads = 0  # times accum_tex got new adaptive sums (the viewer shows them at once)
 
@@ -116,7 +117,7 @@ class Progressive:
         if w * h == 0:
             return 0.0
         if self._adaptive:
-            return self._uploaded_spent / (w * h) if self.job is not None else 0.0
+            return self._uploaded_mean if self.job is not None else 0.0
         return self.passes_done + self.next_row / h
 
     @property
@@ -174,6 +175,7 @@ class Progressive:
             self.job.release()
             self.job = None
         self._uploaded_spent = 0
+        self._uploaded_mean = 0.0
 
     # ------------------------------------------------------------ tracing
 
@@ -278,6 +280,7 @@ class Progressive:
         if self.job is None:
             self.job = AdaptiveRender(self.renderer, w, h, self.samples, seed=self.seed)
             self._uploaded_spent = 0
+            self._uploaded_mean = 0.0
         job = self.job
         budget = (self.target_ms if budget_ms is None else budget_ms) / 1000.0
         t_start = time.perf_counter()
@@ -309,11 +312,13 @@ class Progressive:
 
     def compile_adaptive(self) -> None:
         """Compile the shader variants an adaptive render of the current
-        scene uses (the renderer keeps them), which it otherwise compiles on
-        first use: the first pass's, and the pixel lists' (needed only once
-        a pixel gets a second sample).  For the viewer's soak, which counts
-        GL objects and wants every program compiled during its warm-up."""
-        sampler = AdaptiveSampler(self.renderer, 1, 1)
+        scene uses at the current size and camera (the renderer keeps them),
+        which it otherwise compiles on first use, one per draw: the first
+        pass's, and the pixel lists' (needed only once a pixel gets a second
+        sample), each per group of screen tiles.  For the viewer's soak,
+        which counts GL objects and wants every program compiled during its
+        warm-up."""
+        sampler = AdaptiveSampler(self.renderer, *self.size)
         try:
             sampler.compile()
         finally:
@@ -327,6 +332,9 @@ class Progressive:
             return
         self.accum_tex.write(np.ascontiguousarray(job.total[::-1], dtype=np.float32).tobytes())
         self._uploaded_spent = job.spent
+        # the samples in the pixels' means (the corner rays the adaptive
+        # render also traces are in `spent`, not in any pixel)
+        self._uploaded_mean = float(job.total[..., 3].mean())
         self.uploads += 1
 
     def finish_pass(self) -> None:
