@@ -650,15 +650,13 @@ def test_samples_go_to_the_analytic_silhouette(renderer_for, shape):
     - The picture is where the geometry says: pixels whose centre is more
       than 1 px inside are 0.8, more than 1 px outside 0.
     - Pixels the circle crosses average at least half of max_spp (measured
-      64 = all of it) and 20x the mean of pixels more than 3 px away.
-    - Pixels farther than 2 sqrt(2) px (rounded to 3) from the circle keep
-      1 sample: a pixel is flagged only if two centres within Chebyshev
-      distance 2 of it (3x3 test, then dilated by one) lie on opposite sides
-      of the circle, or (sphere) the normal turns by more than 25 degrees
-      between neighbours, which happens only in the outermost pixel of the
-      sphere's image.
-    - At least 80 % of the samples beyond the first lie on pixels whose
-      centre is within 2 px of the circle (measured 96-97 %).
+      64 = all of it).
+    - Pixels whose square the circle does not reach (centre farther than
+      sqrt(2)/2 px from it) keep 1 sample: a pixel is flagged only when its
+      four corner rays and centre ray disagree, which needs the circle to
+      cross its square (measured: the farthest pixel with more than one
+      sample is 0.56 px (sphere) / 0.64 px (disc) from the circle).
+    - So every sample beyond the first lies on such a pixel.
     - Crossed pixels converge to 0.8 x the share of their square inside
       the circle (64x64 points per pixel): mean error below 0.02 and no
       pixel off by more than 0.1 (a 64-point net on a smooth edge;
@@ -676,13 +674,10 @@ def test_samples_go_to_the_analytic_silhouette(renderer_for, shape):
 
     cov = coverage(w, h, radius)
     crossed = (cov > 0) & (cov < 1)
-    far = np.abs(d) > 3
+    far = np.abs(d) > math.sqrt(0.5) + 1e-9
     assert crossed.sum() > 50
     assert res.spp[crossed].mean() >= 0.5 * max_spp
-    assert res.spp[crossed].mean() >= 20 * res.spp[far].mean()
     assert np.all(res.spp[far] == 1), np.unique(res.spp[far])
-    extra = (res.spp - 1).astype(float)
-    assert extra[np.abs(d) <= 2].sum() >= 0.8 * extra.sum()
     assert res.mean_spp <= samples
 
     err = np.abs(img - EMISSION * cov)[crossed]
@@ -1019,3 +1014,74 @@ def test_cli_timing_with_adaptive_prints_the_spec_line(tmp_path):
     assert len(MEAN_LINE.findall(r.stderr)) == 1
     png = np.asarray(Image.open(tmp_path / "t.png"))
     assert png.shape == (18, 32, 3)
+
+
+# ================================================================ culling, corner rays
+
+
+def test_culled_adaptive_render_is_the_unculled_one(gl):
+    """The adaptive passes draw each group of screen tiles with its culling
+    variant (viewer/culling.py), and the variant is exact: the same render
+    with culling off (every pixel through the full shader) gives the same
+    samples map and, bit for bit, the same image.  The default scene at
+    128x72 is drawn with several variants (checked)."""
+    scene = load_scene("default")
+    culled, full = Renderer(gl, scene), Renderer(gl, scene)
+    full.cull = False
+    try:
+        w, h = 128, 72
+        groups = culled.programs_for(w, h, compile_all=True, **AdaptiveSampler.LIST)
+        assert len({id(p) for p, _ in groups}) >= 2
+        a = render_adaptive(culled, w, h, samples=8, seed=1)
+        b = render_adaptive(full, w, h, samples=8, seed=1)
+        assert a.spp.max() > 1
+        assert np.array_equal(a.spp, b.spp)
+        assert np.array_equal(a.image, b.image)
+    finally:
+        culled.release()
+        full.release()
+
+
+@pytest.mark.parametrize("name", ["glass-sphere", "default"])
+def test_corner_rays_match_the_reference_tracer(renderer_for, name):
+    """The corner pass's rays against the float64 reference tracer along
+    corner_directions (the spec's camera through the pixel corners): the
+    first object met is the same for all but a grazing few (at most 0.5 %
+    of the corners; float32 against float64 on a silhouette), and the
+    colour, where the object agrees, within 2e-3 for 99.5 % of them (the
+    reference tracer's `trace`, exposure applied; at a corner that lies on
+    an edge either side counts).  A corner grid shifted by one pixel fails
+    (checked)."""
+    from viewer import reference
+
+    r = renderer_for(name)
+    w, h = 40, 24
+    sampler = AdaptiveSampler(r, w, h)
+    try:
+        gen = sampler.corner_pass()
+        while True:
+            try:
+                next(gen)
+            except StopIteration as stop:
+                colour, t, obj = stop.value
+                break
+    finally:
+        sampler.release()
+    scene = r.scene
+    d = corner_directions(scene, w, h).reshape(-1, 3)
+    o = np.broadcast_to(np.array(scene.camera.position, float), d.shape)
+    ref_t, ref_obj, _ = reference.first_hit(scene, o, d)
+    ref_obj = np.asarray(ref_obj).reshape(h + 1, w + 1)
+    same = obj == ref_obj
+    assert same.mean() >= 0.995, same.mean()
+    # A corner can lie exactly on an edge (the middle column looks along
+    # x = 0, a checker line): there either side is right, so the colour is
+    # compared with the reference at the corner and nudged by 1e-5 rad.
+    close = np.zeros((h + 1, w + 1), bool)
+    for nudge in ((0, 0, 0), (1e-5, 0, 0), (-1e-5, 0, 0), (0, 1e-5, 0), (0, -1e-5, 0), (0, 0, 1e-5), (0, 0, -1e-5)):
+        ref = reference.trace(scene, o, d + np.array(nudge)).reshape(h + 1, w + 1, 3) * scene.render.exposure
+        close |= np.abs(colour - ref).max(axis=2) < 2e-3
+    assert (close | ~same).mean() >= 0.995, (close | ~same).mean()
+    # and it is not a tolerance that anything passes: the grid one pixel off
+    ref = reference.trace(scene, o, d).reshape(h + 1, w + 1, 3) * scene.render.exposure
+    assert (np.abs(colour[:, 1:] - ref[:, :-1]).max(axis=2) < 2e-3).mean() < 0.9

@@ -530,11 +530,12 @@ PEER_REFERENCE_SAMPLES = 512
 PEER_QUICK_REFERENCE_SAMPLES = 16
 GLASSRAY_SPP = (1, 2, 4, 8, 16, 32, 64)
 MITSUBA_SPP = (1, 2, 4, 8, 16, 32, 64, 128, 256)
-ADAPTIVE_BUDGET = 64
-ADAPTIVE_TARGETS = (0.2, 0.1, 0.05, 0.03, 0.02, 0.01, 0.005)
+#: The adaptive series: `render --adaptive --samples N` at the default
+#: target error, N = each of these budgets (mean rays per pixel).
+ADAPTIVE_BUDGETS = (4, 8, 16, 32, 64)
 QUICK_GLASSRAY_SPP = (1, 2, 4)
 QUICK_MITSUBA_SPP = (1, 2, 4, 8)
-QUICK_ADAPTIVE_TARGETS = (0.1, 0.03)
+QUICK_ADAPTIVE_BUDGETS = (4, 8)
 TARGET_ERRORS = (0.1, 0.07, 0.05, 0.04, 0.03, 0.025, 0.02, 0.015, 0.01)
 #: A Mitsuba point whose warm-up render took longer than this (seconds) ends
 #: its series: the next sample count would take about twice as long.
@@ -733,7 +734,7 @@ def run_bench(args, ctx, backend: str, name: str, scene, width: int, height: int
     ref_samples = args.reference_samples or (PEER_QUICK_REFERENCE_SAMPLES if quick else PEER_REFERENCE_SAMPLES)
     g_spp = QUICK_GLASSRAY_SPP if quick else GLASSRAY_SPP
     m_spp = QUICK_MITSUBA_SPP if quick else MITSUBA_SPP
-    a_targets = QUICK_ADAPTIVE_TARGETS if quick else ADAPTIVE_TARGETS
+    a_budgets = QUICK_ADAPTIVE_BUDGETS if quick else ADAPTIVE_BUDGETS
     limit_s = float(getattr(args, "peer_time_limit", None) or PEER_TIME_LIMIT_S)
 
     info = bench.machine_info(ctx, backend)
@@ -750,7 +751,7 @@ def run_bench(args, ctx, backend: str, name: str, scene, width: int, height: int
     ref, kind, cached = bench.reference_image(scene, stem, width, height, ref_samples, out, ctx=ctx, log=log)
     log(f"reference {'from the cache' if cached else f'took {time.perf_counter() - t0:.1f} s'}")
 
-    from .adaptive import render_adaptive
+    from .adaptive import DEFAULT_TARGET_ERROR, render_adaptive
 
     renderer = Renderer(ctx, scene)
     series: dict[str, list[Point]] = {"glassray": [], "mitsuba": []}
@@ -761,14 +762,13 @@ def run_bench(args, ctx, backend: str, name: str, scene, width: int, height: int
     def mi_run(n):
         return lambda: peer.render(n, seed=bench.RENDER_SEED)
 
-    def ad_run(e):
-        return lambda: render_adaptive(renderer, width, height, ADAPTIVE_BUDGET, e, seed=bench.RENDER_SEED)
+    def ad_run(n):
+        return lambda: render_adaptive(renderer, width, height, n, seed=bench.RENDER_SEED)
 
     try:
         for n in g_spp:
             series["glassray"].append(Point("glassray", f"{n}", n, gl_run(n)))
-        series["glassray adaptive"] = [Point("glassray adaptive", f"e{e:g}", ADAPTIVE_BUDGET, ad_run(e))
-                                       for e in a_targets]
+        series["glassray adaptive"] = [Point("glassray adaptive", f"<={n}", n, ad_run(n)) for n in a_budgets]
         # untimed first renders: the images compared, kernels compiled
         for sname, pts in list(series.items()):
             if sname == "mitsuba":
@@ -776,8 +776,8 @@ def run_bench(args, ctx, backend: str, name: str, scene, width: int, height: int
             for p in pts:
                 res = p.run()
                 if sname == "glassray adaptive":
-                    img, spp_map = res
-                    p.effective_spp = float(np.mean(spp_map))
+                    img = res.image
+                    p.effective_spp = res.rays / res.spp.size     # rays per pixel, the corner rays included
                 else:
                     img = res
                 p.errors = bench.image_errors(img, ref)
@@ -818,7 +818,7 @@ def run_bench(args, ctx, backend: str, name: str, scene, width: int, height: int
                       "max_depth": bench.REFERENCE_MAX_DEPTH, "min_weight": bench.REFERENCE_MIN_WEIGHT},
         "glassray": {"max_depth": scene.render.max_depth, "min_weight": scene.render.min_weight,
                      "sampling": "stratified sub-pixel offsets (viewer.sampling), uniform over the image"},
-        "adaptive": ({"budget_spp": ADAPTIVE_BUDGET, "targets": list(a_targets)} if adaptive else None),
+        "adaptive": ({"budgets_spp": list(a_budgets), "target": DEFAULT_TARGET_ERROR} if adaptive else None),
         "time_to_error": {clock: [{"target": e, "glassray_ms": tg[0], "mitsuba_ms": tm[0],
                                    "ratio": r[0], "ratio_flag": r[1],
                                    "adaptive_ms": ta[0] if ta else None,
