@@ -536,7 +536,7 @@ ADAPTIVE_BUDGETS = (4, 8, 16, 32, 64)
 QUICK_GLASSRAY_SPP = (1, 2, 4)
 QUICK_MITSUBA_SPP = (1, 2, 4, 8)
 QUICK_ADAPTIVE_BUDGETS = (4, 8)
-TARGET_ERRORS = (0.1, 0.07, 0.05, 0.04, 0.03, 0.025, 0.02, 0.015, 0.01)
+TARGET_ERRORS = (0.1, 0.07, 0.05, 0.04, 0.03, 0.025, 0.02, 0.015, 0.01, 0.007, 0.005)
 #: A Mitsuba point whose warm-up render took longer than this (seconds) ends
 #: its series: the next sample count would take about twice as long.
 PEER_TIME_LIMIT_S = 30.0
