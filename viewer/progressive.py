@@ -318,6 +318,8 @@ class Progressive:
         sample), each per group of screen tiles.  For the viewer's soak,
         which counts GL objects and wants every program compiled during its
         warm-up."""
+        if 0 in self.size:
+            return                 # no image yet: nothing to compile for
         sampler = AdaptiveSampler(self.renderer, *self.size)
         try:
             sampler.compile()
