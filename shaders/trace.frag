@@ -51,7 +51,7 @@ int firstObject = -1;
 #define RECORD_FIRST(br, it)
 #endif
 
-#if defined(VIEW_MODE) && VIEW_MODE == 3
+#if (defined(VIEW_MODE) && VIEW_MODE == 3) || defined(ADAPTIVE_FIRST)
 int rayCount = 0;           // the cost view: rays traced for this pixel sample
 #define COUNT_RAY() (++rayCount)
 #else
@@ -474,7 +474,7 @@ void main() {
     fragMoments = vec4(dot(L, L), 0.0, 0.0, 0.0);
 #endif
 #ifdef ADAPTIVE_FIRST
-    fragFirstHit = vec4(firstT, float(firstObject), 0.0, 0.0);
+    fragFirstHit = vec4(firstT, float(firstObject), float(rayCount), 0.0);
 #endif
 #endif
 #endif  // ADAPTIVE_LIST

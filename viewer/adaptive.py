@@ -28,9 +28,12 @@ picture inside glass); a flat region is exact with one centred sample.  So:
    at the convergence rate of a net), no less than what agreeing samples
    may still miss (SLIVER x the pixel's contrast / n), and no less than
    NEIGHBOUR_SHARE of the worst neighbour's (errors lie along edges).  The
-   pixels above the target error whose error^2 / n is largest (the squared
-   error a doubling removes per sample) double their samples, as many as
-   ROUND_SHARE of the budget left pays for (at least MIN_ROUND of the whole).
+   pixels above the target error whose error^2 / (n c) is largest double
+   their samples, c being the rays the pixel's centre sample traced (so the
+   order is by the squared error a doubling removes per unit of work: a
+   sample through glass costs several of one on the floor), as many as
+   ROUND_SHARE of the budget left pays for (at least MIN_ROUND of the
+   whole).
 3. The budget is samples x W x H rays in all (the corner rays included),
    one pixel taking at most MAX_SPP_FACTOR x samples; the render stops when
    it is spent or no pixel is above the target.  Below 3 samples per pixel
@@ -305,20 +308,22 @@ def next_count(n):
 
 
 def choose_by_gain(want: np.ndarray, error: np.ndarray, count: np.ndarray, left: int,
-                   share: float = 0.5, floor: float = 0.0) -> np.ndarray:
+                   share: float = 0.5, floor: float = 0.0, cost: np.ndarray | None = None) -> np.ndarray:
     """The pixels of `want` to upgrade next (from n to next_count(n)
-    samples): in order of error^2 / n (the squared error an upgrade removes
-    per sample it costs), as many as max(share x left, floor) pays for,
-    never more than `left` (at least one pixel's upgrade when affordable;
-    ties by position)."""
+    samples): in order of error^2 / (n cost) (the squared error an upgrade
+    removes per unit of work: per sample, times what a sample of the pixel
+    costs, `cost`, 1 when None), as many as max(share x left, floor) pays
+    for in samples, never more than `left` (at least one pixel's upgrade
+    when affordable; ties by position)."""
     idx = np.flatnonzero(want.ravel())
     if len(idx) == 0:
         return np.zeros_like(want)
     n = count.ravel()[idx]
-    cost = next_count(n) - n
-    order = np.lexsort((idx, -(error.ravel()[idx] ** 2) / n))
-    spend = np.cumsum(cost[order])
-    cap = max(share * left, floor, float(cost[order[0]]))
+    samples = next_count(n) - n
+    work = n if cost is None else n * cost.ravel()[idx]
+    order = np.lexsort((idx, -(error.ravel()[idx] ** 2) / work))
+    spend = np.cumsum(samples[order])
+    cap = max(share * left, floor, float(samples[order[0]]))
     take = order[(spend <= cap) & (spend <= left)]
     out = np.zeros(want.size, bool)
     out[idx[take]] = True
@@ -525,12 +530,15 @@ class AdaptiveSampler:
         """Sample 0 of every pixel.  A generator that yields after each draw
         call and returns (Sums of one sample, t (H, W), object (H, W) int)
         of the first interaction of each camera ray (t = inf, object -1 for
-        the sky)."""
+        the sky), and the rays (H, W) int that sample traced (camera,
+        reflected, refracted and shadow rays: what Renderer.ray_cost
+        counts)."""
         # the programs fetched per band pick up a variant compiled since
         out = yield from self._mrt_pass((self.width, self.height), lambda: self._programs(self.FIRST), offset)
         sums = Sums(np.ascontiguousarray(out[0], np.float64), np.ascontiguousarray(out[1][..., 0], np.float64))
         t, obj = self._first_hits(out[2])
-        return sums, t, obj
+        rays = np.rint(out[2][..., 2]).astype(np.int32)
+        return sums, t, obj, rays
 
     def corner_pass(self):
         """One camera ray through every corner of the pixel grid, (W + 1) x
@@ -749,7 +757,9 @@ class AdaptiveRender:
 
     def _run(self):
         w, h = self.width, self.height
-        sums, t, obj = yield from self._draws(self.sampler.first_pass((0.5, 0.5)))
+        sums, t, obj, rays = yield from self._draws(self.sampler.first_pass((0.5, 0.5)))
+        # what a sample of each pixel costs: the rays its centre sample traced
+        self._cost = np.maximum(rays, 1).astype(np.float64)
         self.total[...] = sums.total
         self.square[...] = sums.square
         self.spent = w * h
@@ -782,7 +792,7 @@ class AdaptiveRender:
             error = with_neighbours(self._own)       # estimated_error, own part kept up to date
             want = flagged & (error > self.target_error) & (next_count(count) <= self.max_spp)
             left = self.budget - self.spent
-            chosen = choose_by_gain(want, error, count, left, ROUND_SHARE, MIN_ROUND * self.budget)
+            chosen = choose_by_gain(want, error, count, left, ROUND_SHARE, MIN_ROUND * self.budget, self._cost)
             if not chosen.any():
                 break
             yield from self._upgrade(chosen)
