@@ -9,7 +9,11 @@ Usage (repository root, the project's virtual environment)::
 
     python tools/viewer_settle.py
 """
-import time, numpy as np, moderngl, sys
+import time
+
+import moderngl
+import numpy as np
+
 from viewer.scene import load_scene
 from viewer.renderer import Renderer
 from viewer.progressive import Progressive
