@@ -530,7 +530,7 @@ def test_first_pass_counts_the_rays_of_the_cost_view(renderer_for):
             try:
                 next(gen)
             except StopIteration as stop:
-                _, _, obj, rays = stop.value
+                _, obj, rays = stop.value
                 break
     finally:
         sampler.release()

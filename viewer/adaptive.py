@@ -63,13 +63,13 @@ on the largest colour channel.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import Callable, NamedTuple
 
 import moderngl
 import numpy as np
 
+from .gpu_scene import camera_uniforms
 from .renderer import intersect_rect
 from .sampling import progressive_offsets
 
@@ -173,20 +173,13 @@ def corner_objects_differ(corner_obj: np.ndarray, centre_obj: np.ndarray) -> np.
 
 def corner_directions(scene, width: int, height: int) -> np.ndarray:
     """(H + 1, W + 1, 3) unit directions of the camera rays through the
-    corners of the pixel grid (the spec's pinhole camera: continuous pixel
-    position (x, y) looks along f + (2x/W - 1) t (W/H) right + (1 - 2y/H) t
-    up), top-left corner first."""
-    cam = scene.camera
-    pos = np.array(cam.position, dtype=np.float64)
-    f = np.array(cam.target, dtype=np.float64) - pos
-    f /= np.linalg.norm(f)
-    right = np.cross(f, [0.0, 1.0, 0.0])
-    right /= np.linalg.norm(right)
-    up = np.cross(right, f)
-    tan = math.tan(math.radians(cam.fov) / 2.0)
-    a = (2.0 * np.arange(width + 1) / width - 1.0) * tan * (width / height)
-    b = (1.0 - 2.0 * np.arange(height + 1) / height) * tan
-    d = f + a[None, :, None] * right + b[:, None, None] * up
+    corners of the pixel grid (the spec's pinhole camera, from the vectors
+    the shader gets: continuous pixel position (x, y) looks along camForward
+    + (2x/W - 1) camRight + (1 - 2y/H) camUp), top-left corner first."""
+    cam = {k: np.array(v) for k, v in camera_uniforms(scene, width, height).items()}
+    a = 2.0 * np.arange(width + 1) / width - 1.0
+    b = 1.0 - 2.0 * np.arange(height + 1) / height
+    d = cam["camForward"] + a[None, :, None] * cam["camRight"] + b[:, None, None] * cam["camUp"]
     return d / np.linalg.norm(d, axis=2, keepdims=True)
 
 
@@ -529,17 +522,17 @@ class AdaptiveSampler:
 
     def first_pass(self, offset=(0.5, 0.5)):
         """Sample 0 of every pixel.  A generator that yields after each draw
-        call and returns (Sums of one sample, t (H, W), object (H, W) int)
-        of the first interaction of each camera ray (t = inf, object -1 for
-        the sky), and the rays (H, W) int that sample traced (camera,
+        call and returns (Sums of one sample, the object (H, W) int of the
+        first interaction of each camera ray (-1 for the sky), and the rays
+        (H, W) int that sample traced (camera,
         reflected, refracted and shadow rays: what Renderer.ray_cost
         counts)."""
         # the programs fetched per band pick up a variant compiled since
         out = yield from self._mrt_pass((self.width, self.height), lambda: self._programs(self.FIRST), offset)
         sums = Sums(np.ascontiguousarray(out[0], np.float64), np.ascontiguousarray(out[1][..., 0], np.float64))
-        t, obj = self._first_hits(out[2])
+        _, obj = self._first_hits(out[2])
         rays = np.rint(out[2][..., 2]).astype(np.int32)
-        return sums, t, obj, rays
+        return sums, obj, rays
 
     def corner_pass(self):
         """One camera ray through every corner of the pixel grid, (W + 1) x
@@ -749,8 +742,7 @@ class AdaptiveRender:
             # a box of one colour stays at one sample
             flagged |= corner_objects_differ(corner_obj, obj) & (contrast > self.target_error)
             flagged |= checker_cells_differ(scene, corner_t, corner_obj)
-        bends = np.array([scene.is_transparent(o) or scene.materials[o.material].reflectivity > 0
-                          for o in scene.objects] + [False])
+        bends = np.array([scene.scatters(o) for o in scene.objects] + [False])
         through = np.logical_or.reduce([bends[o] for o in _corners(corner_obj) + [obj]])
         if through.any():
             flagged |= through & (colour_contrast(centre) > level)
@@ -758,7 +750,7 @@ class AdaptiveRender:
 
     def _run(self):
         w, h = self.width, self.height
-        sums, t, obj, rays = yield from self._draws(self.sampler.first_pass((0.5, 0.5)))
+        sums, obj, rays = yield from self._draws(self.sampler.first_pass((0.5, 0.5)))
         # what a sample of each pixel costs: the rays its centre sample traced
         self._cost = np.maximum(rays, 1).astype(np.float64)
         self.total[...] = sums.total

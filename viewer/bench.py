@@ -73,6 +73,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .adaptive import DEFAULT_TARGET_ERROR  # (no GL at import: the module creates no context)
+
 #: The benchmark's scenes when none is named: the default scene, opaque only,
 #: one glass sphere, many objects.
 DEFAULT_SCENES = ("default", "bench-opaque", "glass-sphere", "bench-many")
@@ -121,8 +123,6 @@ class Setting:
         return (self.max_depth, self.samples, self.min_weight, self.scale, self.specialise, self.fresnel,
                 self.adaptive)
 
-
-from .adaptive import DEFAULT_TARGET_ERROR  # noqa: E402  (no GL at import: the module creates no context)
 
 #: Adaptive points of the full sweep: (target error, budget as a multiple of
 #: the scene's samples).  0.05 and 0.01 stop before the budget on some

@@ -92,7 +92,7 @@ def tile_subsets(scene: Scene, width: int, height: int, tile: int = TILE) -> tup
     centres = spheres[:, :3] + eye
     radii = np.where(spheres[:, 3] >= 0, spheres[:, 3] + pad, -1.0)
     planes = [k for k, o in enumerate(objs) if o.type == "plane"]
-    scatters = np.array([scene.is_transparent(o) or scene.materials[o.material].reflectivity > 0 for o in objs])
+    scatters = np.array([scene.scatters(o) for o in objs])
     holds_eye = [k for k, o in enumerate(objs) if scene.is_transparent(o) and contains_point(o, eye)]
     lights = [lt for lt in scene.lights if lt.intensity > 0 and max(lt.color) > 0]
 
@@ -241,7 +241,7 @@ def plan_key(scene: Scene, width: int, height: int) -> tuple:
     geometry and whether it reflects or transmits."""
     c = scene.camera
     objs = tuple((o.type, o.height, o.center, o.radius, o.min, o.max, o.rotate, o.axis, o.base, o.wall,
-                  scene.is_transparent(o), scene.materials[o.material].reflectivity > 0) for o in scene.objects)
+                  scene.is_transparent(o), scene.scatters(o)) for o in scene.objects)
     lights = tuple((lt.type, lt.position, lt.direction, lt.intensity > 0 and max(lt.color) > 0)
                    for lt in scene.lights)
     return (width, height, tuple(c.position), tuple(c.target), c.fov, objs, lights)

@@ -140,6 +140,11 @@ class Scene:
     def is_transparent(self, obj: SceneObject) -> bool:
         return self.materials[obj.material].is_dielectric
 
+    def scatters(self, obj: SceneObject) -> bool:
+        """Whether a ray that meets it goes on (refracted or reflected): it
+        is transparent or reflects."""
+        return self.is_transparent(obj) or self.materials[obj.material].reflectivity > 0
+
     def features(self) -> list[str]:
         """The shading features this scene uses (what ``check`` prints and the
         shader specialisation keys on)."""
