@@ -131,15 +131,37 @@ class AdaptiveResult:
 # ---------------------------------------------------------------- pure parts
 
 
+# numpy reduces a short last axis (the colour channels) or a list of arrays
+# (stacked into one first) an order of magnitude slower than it applies a
+# ufunc pairwise: these helpers do the latter.
+def _channel_max(a: np.ndarray) -> np.ndarray:
+    """The largest of the (..., 3) channels."""
+    return np.maximum(np.maximum(a[..., 0], a[..., 1]), a[..., 2])
+
+
+def _channel_sum(a: np.ndarray) -> np.ndarray:
+    """The sum of the (..., 3) channels."""
+    return a[..., 0] + a[..., 1] + a[..., 2]
+
+
+def _fold(ufunc, arrays) -> np.ndarray:
+    """ufunc applied pairwise over a list of arrays (ufunc.reduce of their stack)."""
+    out = arrays[0]
+    for a in arrays[1:]:
+        out = ufunc(out, a)
+    return out
+
+
 def _neighbourhood(a: np.ndarray, reduce) -> np.ndarray:
     """reduce over the 3x3 neighbourhood of every pixel (edges replicated) of
     an (H, W, ...) array; reduce is np.maximum or np.minimum."""
-    h, w = a.shape[:2]
-    p = np.pad(a, [(1, 1), (1, 1)] + [(0, 0)] * (a.ndim - 2), mode="edge")
-    out = a.copy()
-    for dy in (0, 1, 2):
-        for dx in (0, 1, 2):
-            out = reduce(out, p[dy:dy + h, dx:dx + w])
+    # separable: along rows, then along columns (4 reductions, not 9)
+    rows = a.copy()
+    reduce(rows[:, 1:], a[:, :-1], out=rows[:, 1:])
+    reduce(rows[:, :-1], a[:, 1:], out=rows[:, :-1])
+    out = rows.copy()
+    reduce(out[1:], rows[:-1], out=out[1:])
+    reduce(out[:-1], rows[1:], out=out[:-1])
     return out
 
 
@@ -148,7 +170,7 @@ def colour_contrast(image: np.ndarray) -> np.ndarray:
     colour channels, between a pixel's colour and its neighbours'."""
     hi = _neighbourhood(image, np.maximum)
     lo = _neighbourhood(image, np.minimum)
-    return np.maximum(hi - image, image - lo).max(axis=2)
+    return _channel_max(np.maximum(hi - image, image - lo))
 
 
 def _corners(a: np.ndarray) -> list[np.ndarray]:
@@ -161,14 +183,14 @@ def corner_contrast(corner_colour: np.ndarray, centre_colour: np.ndarray) -> np.
     """(H, W): max - min over a pixel's four corner colours and its centre
     colour, largest channel (corner_colour (H + 1, W + 1, 3))."""
     five = _corners(corner_colour) + [centre_colour]
-    return (np.maximum.reduce(five) - np.minimum.reduce(five)).max(axis=2)
+    return _channel_max(_fold(np.maximum, five) - _fold(np.minimum, five))
 
 
 def corner_objects_differ(corner_obj: np.ndarray, centre_obj: np.ndarray) -> np.ndarray:
     """(H, W) bool: a pixel's four corner rays and centre ray do not all
     meet the same object first (-1: the sky)."""
     five = _corners(corner_obj) + [centre_obj]
-    return np.maximum.reduce(five) != np.minimum.reduce(five)
+    return _fold(np.maximum, five) != _fold(np.minimum, five)
 
 
 def corner_directions(scene, width: int, height: int) -> np.ndarray:
@@ -180,7 +202,7 @@ def corner_directions(scene, width: int, height: int) -> np.ndarray:
     a = 2.0 * np.arange(width + 1) / width - 1.0
     b = 1.0 - 2.0 * np.arange(height + 1) / height
     d = cam["camForward"] + a[None, :, None] * cam["camRight"] + b[:, None, None] * cam["camUp"]
-    return d / np.linalg.norm(d, axis=2, keepdims=True)
+    return d / np.sqrt(_channel_sum(d * d))[..., None]
 
 
 def checker_cells_differ(scene, t: np.ndarray, obj: np.ndarray) -> np.ndarray:
@@ -207,12 +229,12 @@ def checker_cells_differ(scene, t: np.ndarray, obj: np.ndarray) -> np.ndarray:
     ok = np.isfinite(t) & np.isfinite(s)
     p = eye + corner_directions(scene, w, h) * np.where(ok, t, 0.0)[..., None]
     s = np.where(ok, s, 1.0)
-    same = np.logical_and.reduce([c_ok & (c_obj == _corners(obj)[0])
+    same = _fold(np.logical_and, [c_ok & (c_obj == _corners(obj)[0])
                                   for c_ok, c_obj in zip(_corners(ok), _corners(obj))])
     for axis in (0, 2):                                  # the squares are in world x and z
         cells = np.where(ok, np.floor(p[..., axis] / s), 0.0)
         q = _corners(cells)
-        out |= same & (np.maximum.reduce(q) != np.minimum.reduce(q))
+        out |= same & (_fold(np.maximum, q) != _fold(np.minimum, q))
     return out
 
 
@@ -236,7 +258,7 @@ def standard_error(sums: Sums) -> np.ndarray:
     the channels (an upper bound of every channel's); 0 below two samples."""
     n = sums.count
     mean = sums.mean
-    var = np.maximum(sums.square / np.maximum(n, 1) - np.sum(mean * mean, axis=-1), 0.0)
+    var = np.maximum(sums.square / np.maximum(n, 1) - _channel_sum(mean * mean), 0.0)
     var = var * n / np.maximum(n - 1, 1)
     return np.where(n > 1, np.sqrt(var / np.maximum(n, 1)), 0.0)
 
@@ -254,7 +276,7 @@ def prefix_error(total: np.ndarray, prev: np.ndarray) -> np.ndarray:
     mean_n = total[..., :3] / np.maximum(n, 1)[..., None]
     mean_p = prev[..., :3] / np.maximum(p, 1)[..., None]
     k = np.sqrt(p / np.maximum(n - p, 1))
-    return np.where(ok, k * np.abs(mean_n - mean_p).max(axis=-1), 0.0)
+    return np.where(ok, k * _channel_max(np.abs(mean_n - mean_p)), 0.0)
 
 
 def spread_error(sums: Sums) -> np.ndarray:
@@ -315,7 +337,8 @@ def choose_by_gain(want: np.ndarray, error: np.ndarray, count: np.ndarray, left:
     n = count.ravel()[idx]
     samples = next_count(n) - n
     work = n if cost is None else n * cost.ravel()[idx]
-    order = np.lexsort((idx, -(error.ravel()[idx] ** 2) / work))
+    # idx is ascending, so a stable sort breaks ties by position
+    order = np.argsort(-(error.ravel()[idx] ** 2) / work, kind="stable")
     spend = np.cumsum(samples[order])
     cap = max(share * left, floor, float(samples[order[0]]))
     take = order[(spend <= cap) & (spend <= left)]
@@ -442,6 +465,7 @@ class AdaptiveSampler:
         self._list_size = (0, 0)
         self._offsets_tex = None
         self._mrt: dict[tuple[int, int], moderngl.Framebuffer] = {}
+        self._labels_key, self._labels = None, None      # group_labels' last answer
         #: pixel-samples one draw call may trace; read before every draw, so
         #: the viewer can fit draws into its frame budget as it goes
         self.fragments_per_draw = FRAGMENTS_PER_DRAW
@@ -463,12 +487,16 @@ class AdaptiveSampler:
     def group_labels(self, programs) -> np.ndarray:
         """(H, W) int8, top row first: which of `programs`' groups of
         rectangles each pixel is drawn by."""
-        w, h = self.width, self.height
-        labels = np.full((h, w), -1, np.int8)
-        for g, (_, rects) in enumerate(programs):
-            for x, y, rw, rh in rects:
-                labels[h - y - rh:h - y, x:x + rw] = g
-        return labels
+        key = tuple(rects for _, rects in programs)
+        if key != self._labels_key:                # the plan changes with the camera only
+            w, h = self.width, self.height
+            labels = np.full((h, w), -1, np.int8)
+            for g, rects in enumerate(key):
+                for x, y, rw, rh in rects:
+                    labels[h - y - rh:h - y, x:x + rw] = g
+            labels.setflags(write=False)
+            self._labels_key, self._labels = key, labels
+        return self._labels
 
     def _mrt_target(self, size) -> moderngl.Framebuffer:
         """Three RGBA32F targets of `size` for the ADAPTIVE_FIRST variants
@@ -678,6 +706,9 @@ class AdaptiveRender:
         self.budget = samples * width * height
         self.offsets = progressive_offsets(self.max_spp, seed)
         self.sampler = AdaptiveSampler(renderer, width, height)
+        # every pixel in coherent_order, once: the chosen ones in that order
+        # are a mask of it (no sort per round)
+        self._coherent = coherent_order(np.arange(width * height), width)
         self.total = np.zeros((height, width, 4))
         self.square = np.zeros((height, width))
         self.prev = np.zeros((height, width, 4))      # total at the previous count (0: none)
@@ -743,7 +774,7 @@ class AdaptiveRender:
             flagged |= corner_objects_differ(corner_obj, obj) & (contrast > self.target_error)
             flagged |= checker_cells_differ(scene, corner_t, corner_obj)
         bends = np.array([scene.scatters(o) for o in scene.objects] + [False])
-        through = np.logical_or.reduce([bends[o] for o in _corners(corner_obj) + [obj]])
+        through = _fold(np.logical_or, [bends[o] for o in _corners(corner_obj) + [obj]])
         if through.any():
             flagged |= through & (colour_contrast(centre) > level)
         return flagged, contrast
@@ -793,7 +824,7 @@ class AdaptiveRender:
     def _upgrade(self, chosen: np.ndarray):
         """Take every chosen pixel from n to next_count(n) samples (at most
         max_spp) in one pass over one pixel list."""
-        flat = coherent_order(np.flatnonzero(chosen.ravel()), self.width)
+        flat = self._coherent[chosen.ravel()[self._coherent]]     # coherent_order of the chosen pixels
         if len(flat) == 0:
             return
         n = np.rint(self.total.reshape(-1, 4)[flat, 3]).astype(np.int64)
