@@ -775,6 +775,37 @@ def test_same_seed_same_result_other_seed_differs_but_converges(gl, renderer_for
     assert rmse(a.image, converged) < 0.007 and rmse(d.image, converged) < 0.007
 
 
+def test_replaying_recorded_samples_gives_the_gpu_render(gl, renderer_for):
+    """tools/adaptive_bound.py's premise: AdaptiveRender with its sampler
+    replaced by one that adds up samples recorded one by one (float64,
+    where the GPU adds float32) makes the same choices as the GPU render:
+    glass-sphere at 64x36, budget 8 (max 64 samples per pixel).  Equal
+    samples maps and images within 1e-5; an estimate replaced by a constant
+    one (every pixel looks equally bad) changes the map, so the comparison
+    sees the estimate."""
+    sys.path.insert(0, os.path.join(os.path.dirname(__file__), os.pardir, "tools"))
+    try:
+        import adaptive_bound as ab
+    finally:
+        sys.path.pop(0)
+    r = renderer_for("glass-sphere")
+    w, h, budget = 64, 36, 8
+    rec = ab.Recording(r, seed=3, width=w, height=h, record=MAX_SPP_FACTOR * budget)
+    assert 0 < len(rec.flat) < w * h
+    real = render_adaptive(r, w, h, budget, seed=3)
+    replay = AdaptiveRender(r, w, h, budget, seed=3, sampler=ab.ReplaySampler(rec)).run()
+    np.testing.assert_array_equal(replay.spp, real.spp)
+    np.testing.assert_allclose(replay.image, real.image, atol=1e-5)
+    assert replay.rays == real.rays
+
+    class Constant(AdaptiveRender):
+        def estimate(self, flat, sums, prev):
+            return np.ones(len(flat))
+
+    blind = Constant(r, w, h, budget, seed=3, sampler=ab.ReplaySampler(rec)).run()
+    assert not np.array_equal(blind.spp, real.spp)
+
+
 @pytest.mark.parametrize("name", sorted(FLAT_SCENES))
 def test_a_flat_scene_takes_one_sample_per_pixel(renderer_for, name):
     """One colour everywhere and no edge in view: every pixel ends with one

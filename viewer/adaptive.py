@@ -697,15 +697,20 @@ class AdaptiveRender:
     the pixel's previous sample count (for the prefix difference)."""
 
     def __init__(self, renderer, width: int, height: int, samples: int | None = None,
-                 target_error: float = DEFAULT_TARGET_ERROR, seed: int = 0, max_spp: int | None = None):
+                 target_error: float = DEFAULT_TARGET_ERROR, seed: int = 0, max_spp: int | None = None,
+                 sampler=None):
         samples = int(samples or renderer.scene.render.samples)
+        self.scene = renderer.scene
         self.width, self.height = width, height
         self.samples = samples
         self.target_error = float(target_error)
         self.max_spp = int(max_spp or min(MAX_SPP_FACTOR * samples, MAX_SPP))
         self.budget = samples * width * height
         self.offsets = progressive_offsets(self.max_spp, seed)
-        self.sampler = AdaptiveSampler(renderer, width, height)
+        # `sampler`: anything with AdaptiveSampler's passes (first_pass,
+        # corner_pass, set_offsets, add_samples, release) for this size;
+        # tools/adaptive_bound.py replays recorded samples through one
+        self.sampler = sampler if sampler is not None else AdaptiveSampler(renderer, width, height)
         # every pixel in coherent_order, once: the chosen ones in that order
         # are a mask of it (no sort per round)
         self._coherent = coherent_order(np.arange(width * height), width)
@@ -764,7 +769,7 @@ class AdaptiveRender:
               corner_obj: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(flagged (H, W) bool, contrast (H, W)) from the centre colours and
         first objects and the corner rays (module docstring, step 1)."""
-        scene = self.sampler.renderer.scene
+        scene = self.scene
         contrast = corner_contrast(corner_colour, centre)
         level = max(self.target_error, FLAG_CONTRAST)
         flagged = contrast > level
@@ -836,7 +841,13 @@ class AdaptiveRender:
         self.spent += int(more.sum())
         self.rounds.append((int(more.sum()), len(flat)))
         sums = Sums(self.total.reshape(-1, 4)[flat], self.square.ravel()[flat])
-        self._own.ravel()[flat] = own_error(sums, self.prev.reshape(-1, 4)[flat], self._contrast.ravel()[flat])
+        self._own.ravel()[flat] = self.estimate(flat, sums, self.prev.reshape(-1, 4)[flat])
+
+    def estimate(self, flat: np.ndarray, sums: Sums, prev: np.ndarray) -> np.ndarray:
+        """The own error (own_error) of the pixels `flat` from their sums
+        and their sums at the previous count; what the rounds rank by
+        before the neighbour term (a measurement can put an oracle here)."""
+        return own_error(sums, prev, self._contrast.ravel()[flat])
 
     def _draws(self, gen):
         """Run one of the sampler's generators, counting its draw calls (one
