@@ -497,6 +497,37 @@ def test_choose_by_gain_hand_case():
     np.testing.assert_array_equal(got, [[True, False]])
 
 
+def test_choose_by_gain_is_the_prefix_of_the_full_order():
+    """choose_by_gain sorts only what the prefix can hold; on random cases
+    (many ties, every budget from none to all) it takes exactly the longest
+    prefix of the whole order by (-error^2 / (n cost), position) that
+    spends at most min(max(share x left, floor, the first one's samples),
+    left), written out here with a full lexsort."""
+    def by_full_sort(want, error, count, left, share, floor, cost):
+        idx = np.flatnonzero(want.ravel())
+        out = np.zeros(want.size, bool)
+        if len(idx):
+            n = count.ravel()[idx]
+            samples = next_count(n) - n
+            work = n * (1.0 if cost is None else cost.ravel()[idx])
+            order = np.lexsort((idx, -(error.ravel()[idx] ** 2) / work))
+            spend = np.cumsum(samples[order])
+            cap = max(share * left, floor, float(samples[order[0]]))
+            out[idx[order[(spend <= cap) & (spend <= left)]]] = True
+        return out.reshape(want.shape)
+
+    rng = np.random.default_rng(7)
+    for case in range(1500):
+        h, w = (int(v) for v in rng.integers(1, 14, 2))
+        want = rng.random((h, w)) < rng.random()
+        error = np.round(rng.random((h, w)), int(rng.integers(0, 3)))
+        count = rng.choice([1.0, 4.0, 8.0, 16.0], (h, w))
+        cost = rng.choice([1.0, 2.0, 5.0], (h, w)) if case % 2 else None
+        left, share, floor = int(rng.integers(0, 500)), float(rng.random()), float(rng.integers(0, 120))
+        np.testing.assert_array_equal(choose_by_gain(want, error, count, left, share, floor, cost),
+                                      by_full_sort(want, error, count, left, share, floor, cost), err_msg=str(case))
+
+
 def test_choose_by_gain_weighs_the_cost_of_a_sample():
     """With a cost per sample the order is error^2 / (n cost): two pixels of
     equal error and count, one twice as dear, the cheap one first; a dear

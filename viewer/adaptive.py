@@ -64,6 +64,7 @@ on the largest colour channel.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import lru_cache
 from typing import Callable, NamedTuple
 
 import moderngl
@@ -337,11 +338,21 @@ def choose_by_gain(want: np.ndarray, error: np.ndarray, count: np.ndarray, left:
     n = count.ravel()[idx]
     samples = next_count(n) - n
     work = n if cost is None else n * cost.ravel()[idx]
-    # idx is ascending, so a stable sort breaks ties by position
-    order = np.argsort(-(error.ravel()[idx] ** 2) / work, kind="stable")
-    spend = np.cumsum(samples[order])
-    cap = max(share * left, floor, float(samples[order[0]]))
-    take = order[(spend <= cap) & (spend <= left)]
+    key = -(error.ravel()[idx] ** 2) / work
+    # The order is by key, ties by position (idx is ascending: a stable
+    # sort); what is taken is the longest prefix of it that spends at most
+    # cap.  Only the prefix needs sorting: it holds at most cap / (fewest
+    # samples) pixels, all among those with the k0 smallest keys.
+    cap = min(max(share * left, floor, float(samples[np.argmin(key)])), left)
+    if samples.sum() <= cap:
+        take = np.arange(len(idx))
+    else:
+        k0 = int(cap // samples.min()) + 1
+        cand = np.arange(len(idx))
+        if k0 < len(idx):
+            cand = np.flatnonzero(key <= np.partition(key, k0 - 1)[k0 - 1])   # ties at the cut included
+        order = cand[np.argsort(key[cand], kind="stable")]
+        take = order[np.cumsum(samples[order]) <= cap]
     out = np.zeros(want.size, bool)
     out[idx[take]] = True
     return out.reshape(want.shape)
@@ -404,8 +415,19 @@ def coherent_order(pixels: np.ndarray, width: int, tile: int = 8) -> np.ndarray:
     block of the list, the block a software rasteriser shades at once)."""
     i, j = pixels % width, pixels // width
     tiles_x = (width + tile - 1) // tile
-    key = ((j // tile) * tiles_x + i // tile) * (tile * tile) + z_index(i % tile, j % tile)
+    inside = np.arange(tile * tile)
+    z = z_index(inside % tile, inside // tile)          # a table: the Z-order index inside a square
+    key = ((j // tile) * tiles_x + i // tile) * (tile * tile) + z[(j % tile) * tile + i % tile]
     return pixels[np.argsort(key, kind="stable")]
+
+
+@lru_cache(maxsize=4)
+def image_coherent_order(width: int, height: int) -> np.ndarray:
+    """coherent_order of every pixel of a width x height image (read-only,
+    cached: the viewer restarts a render at every change of view)."""
+    out = coherent_order(np.arange(width * height), width)
+    out.setflags(write=False)
+    return out
 
 
 def list_width(count: int) -> int:
@@ -713,7 +735,7 @@ class AdaptiveRender:
         self.sampler = sampler if sampler is not None else AdaptiveSampler(renderer, width, height)
         # every pixel in coherent_order, once: the chosen ones in that order
         # are a mask of it (no sort per round)
-        self._coherent = coherent_order(np.arange(width * height), width)
+        self._coherent = image_coherent_order(width, height)
         self.total = np.zeros((height, width, 4))
         self.square = np.zeros((height, width))
         self.prev = np.zeros((height, width, 4))      # total at the previous count (0: none)
@@ -809,6 +831,11 @@ class AdaptiveRender:
         self._contrast = contrast
         self._own = sliver_error(contrast, 1)
         self.sampler.set_offsets(self.offsets)
+        # Kept per pixel by _upgrade (contiguous, so rounds do not copy
+        # strided views of the image): the samples, and whether another
+        # upgrade fits under max_spp (only flagged pixels are upgraded).
+        self._count = np.ones((h, w))
+        self._room = flagged & (next_count(1) <= self.max_spp)
         # Every flagged pixel first goes to FIRST_ROUND samples (a spread
         # needs several), the most contrasted first if the budget is short.
         chosen = choose_within_budget(flagged, contrast, min(FIRST_ROUND, self.max_spp) - 1, self.budget - self.spent)
@@ -817,11 +844,10 @@ class AdaptiveRender:
         # target and largest for its cost double their samples, until the
         # budget is spent.  A pixel that is not flagged keeps one sample.
         while True:
-            count = self.total[..., 3]
             error = with_neighbours(self._own)       # estimated_error, own part kept up to date
-            want = flagged & (error > self.target_error) & (next_count(count) <= self.max_spp)
+            want = self._room & (error > self.target_error)
             left = self.budget - self.spent
-            chosen = choose_by_gain(want, error, count, left, ROUND_SHARE, MIN_ROUND * self.budget, self._cost)
+            chosen = choose_by_gain(want, error, self._count, left, ROUND_SHARE, MIN_ROUND * self.budget, self._cost)
             if not chosen.any():
                 break
             yield from self._upgrade(chosen)
@@ -832,16 +858,20 @@ class AdaptiveRender:
         flat = self._coherent[chosen.ravel()[self._coherent]]     # coherent_order of the chosen pixels
         if len(flat) == 0:
             return
-        n = np.rint(self.total.reshape(-1, 4)[flat, 3]).astype(np.int64)
+        total, square = self.total.reshape(-1, 4), self.square.ravel()       # views
+        old = total[flat]
+        n = np.rint(old[:, 3]).astype(np.int64)
         more = np.minimum(next_count(n), self.max_spp) - n
         tot, sq = yield from self._draws(self.sampler.add_samples(flat, n, more))
-        self.prev.reshape(-1, 4)[flat] = self.total.reshape(-1, 4)[flat]
-        self.total.reshape(-1, 4)[flat] += tot
-        self.square.ravel()[flat] += sq
+        sums = Sums(old + tot, square[flat] + sq)
+        total[flat] = sums.total
+        square[flat] = sums.square
+        self.prev.reshape(-1, 4)[flat] = old
+        self._count.ravel()[flat] = n + more
+        self._room.ravel()[flat] = next_count(n + more) <= self.max_spp
         self.spent += int(more.sum())
         self.rounds.append((int(more.sum()), len(flat)))
-        sums = Sums(self.total.reshape(-1, 4)[flat], self.square.ravel()[flat])
-        self._own.ravel()[flat] = self.estimate(flat, sums, self.prev.reshape(-1, 4)[flat])
+        self._own.ravel()[flat] = self.estimate(flat, sums, old)
 
     def estimate(self, flat: np.ndarray, sums: Sums, prev: np.ndarray) -> np.ndarray:
         """The own error (own_error) of the pixels `flat` from their sums
