@@ -48,35 +48,6 @@ def test_ray_cost_counts_camera_and_shadow_rays(gl):
     assert c[-1, 8] == 1
 
 
-def test_no_shadow_ray_where_the_light_term_is_zero(gl):
-    """A light's Phong term k_d n.l + k_s max(0, r.v)^p multiplies its
-    visibility, so where it is zero no shadow ray is traced.  A floor seen
-    from (0, 1, 5), 17x17, its lower half (rows 9-16) on the floor:
-    - k_d = k_s = 0 (ambient only): the camera ray only, and still lit;
-    - k_d = 0, k_s = 1, p = 200, the light behind and above the eye: every
-      mirror direction r points away from the eye (r.v < 0): no shadow ray;
-    - the same with the light in front, low over the floor: r.v is near 1
-      on the floor's near part, so shadow rays are traced there."""
-    def cost(material, light):
-        doc = {"camera": {"position": [0, 1, 5], "target": [0, 0.5, 0], "fov": 60},
-               "lights": [{"position": light}],
-               "materials": {"m": {"color": [0.8, 0.8, 0.8], **material}},
-               "objects": [{"type": "plane", "material": "m"}]}
-        r = Renderer(gl, make_scene(doc))
-        try:
-            return r.ray_cost(17, 17)[9:], r.render(17, 17, 1)[9:]
-        finally:
-            r.release()
-
-    floor, img = cost({"diffuse": 0.0, "ambient": 0.5}, [0, 5, 0])
-    assert (floor == 1).all() and img.min() > 0
-    sharp = {"diffuse": 0.0, "specular": 1.0, "shininess": 200}
-    floor, _ = cost(sharp, [0, 6, 12])
-    assert (floor == 1).all()
-    floor, _ = cost(sharp, [0, 1, -5])
-    assert floor.max() == 2 and (floor[-1] == 2).all()
-
-
 def test_generic_shader_draws_the_same_image(gl):
     # Specialisation must be image-neutral: the all-features shader with
     # run-time counts gives the same picture on every built-in scene.
