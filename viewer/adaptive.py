@@ -43,11 +43,14 @@ picture inside glass); a flat region is exact with one centred sample.  So:
 Measured (README, "Adaptive anti-aliasing"; tools/adaptive_vs_uniform.py):
 against a 512-sample float64 reference on glass-sphere at 320x180 this
 estimator and the corner rays reach the error of 64 uniform samples with
-24 rays per pixel, where the 3x3-neighbourhood flags and an even/odd-halves
-estimate of the first version needed between 32 and 64.  (The even- and
-odd-index points of the scrambled Sobol' sequence lie in the two halves of
-the pixel, so their difference measured a left/right asymmetry, not the
-error.)
+about 26 rays per pixel, where the 3x3-neighbourhood flags and an
+even/odd-halves estimate of the first version needed between 32 and 64.
+(The even- and odd-index points of the scrambled Sobol' sequence lie in the
+two halves of the pixel, so their difference measured a left/right
+asymmetry, not the error.)  Ranked by each pixel's expected error instead
+(tools/adaptive_bound.py: a perfect estimate), the same rounds would need
+about 20: the limit is the share of pixels that hold edges, not the
+estimate.
 
 The GPU traces only listed pixels: a small framebuffer whose fragment
 (x, y) traces the samples of the image pixel stored at (x, y) of a list
