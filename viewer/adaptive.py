@@ -562,8 +562,9 @@ class AdaptiveSampler:
                 ctx.scissor = None
                 top += rows
                 yield
-            return [np.frombuffer(fbo.read(attachment=k, components=4, dtype="f4"), np.float32)
-                    .reshape(h, w, 4)[::-1] for k in range(3)]
+            # only the channels the attachments use: (sum L, 1), L.L, (t, object, rays)
+            return [np.frombuffer(fbo.read(attachment=k, components=c, dtype="f4"), np.float32)
+                    .reshape(h, w, c)[::-1] for k, c in enumerate((4, 1, 3))]
         finally:
             ctx.scissor = None
 
@@ -691,8 +692,8 @@ class AdaptiveSampler:
                     y += cut
                     yield
                 k0 += batch
-        total, square = (np.frombuffer(fbo.read(attachment=a, components=4, dtype="f4"), np.float32)
-                         .reshape(lh * lw, 4)[slot] for a in (0, 1))
+        total, square = (np.frombuffer(fbo.read(attachment=a, components=c, dtype="f4"), np.float32)
+                         .reshape(lh * lw, c)[slot] for a, c in ((0, 4), (1, 1)))
         return total.astype(np.float64), square[:, 0].astype(np.float64)
 
     def _release_list(self) -> None:
