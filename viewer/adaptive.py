@@ -234,7 +234,7 @@ def checker_cells_differ(scene, t: np.ndarray, obj: np.ndarray) -> np.ndarray:
     p = eye + corner_directions(scene, w, h) * np.where(ok, t, 0.0)[..., None]
     s = np.where(ok, s, 1.0)
     same = _fold(np.logical_and, [c_ok & (c_obj == _corners(obj)[0])
-                                  for c_ok, c_obj in zip(_corners(ok), _corners(obj))])
+                                 for c_ok, c_obj in zip(_corners(ok), _corners(obj))])
     for axis in (0, 2):                                  # the squares are in world x and z
         cells = np.where(ok, np.floor(p[..., axis] / s), 0.0)
         q = _corners(cells)
