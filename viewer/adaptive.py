@@ -745,6 +745,7 @@ class AdaptiveRender:
         self.prev = np.zeros((height, width, 4))      # total at the previous count (0: none)
         self.spent = 0                    # rays traced (pixel samples and corner rays)
         self.draws_done = 0
+        self.steps_done = 0               # step() calls: draw calls and the bookkeeping between passes
         self.rounds: list[tuple[int, int]] = []
         self.done = False
         self._gen = self._run()
@@ -755,6 +756,7 @@ class AdaptiveRender:
         """Run one draw call (and the bookkeeping after it); True when done."""
         if self.done:
             return True
+        self.steps_done += 1
         try:
             next(self._gen)
         except StopIteration:
@@ -795,6 +797,16 @@ class AdaptiveRender:
               corner_obj: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(flagged (H, W) bool, contrast (H, W)) from the centre colours and
         first objects and the corner rays (module docstring, step 1)."""
+        gen = self._flag_steps(centre, obj, corner_colour, corner_t, corner_obj)
+        while True:
+            try:
+                next(gen)
+            except StopIteration as stop:
+                return stop.value
+
+    def _flag_steps(self, centre, obj, corner_colour, corner_t, corner_obj):
+        """flags() as a generator that yields between its parts (each about
+        0.1 s of numpy at 1280x720: the viewer draws a frame in between)."""
         scene = self.scene
         contrast = corner_contrast(corner_colour, centre)
         level = max(self.target_error, FLAG_CONTRAST)
@@ -803,10 +815,12 @@ class AdaptiveRender:
             # an edge whose sides look alike (within the target) is no error:
             # a box of one colour stays at one sample
             flagged |= corner_objects_differ(corner_obj, obj) & (contrast > self.target_error)
+            yield
             flagged |= checker_cells_differ(scene, corner_t, corner_obj)
         bends = np.array([scene.scatters(o) for o in scene.objects] + [False])
         through = _fold(np.logical_or, [bends[o] for o in _corners(corner_obj) + [obj]])
         if through.any():
+            yield
             flagged |= through & (colour_contrast(centre) > level)
         return flagged, contrast
 
@@ -821,11 +835,17 @@ class AdaptiveRender:
         self.rounds.append((w * h, w * h))
         if self.max_spp < 2 or self.budget - self.spent < FIRST_ROUND - 1:
             return                                    # no room for anything but the centres
+        # Bare yields (steps with no draw call) split the bookkeeping between
+        # passes, which takes tenths of a second at 1280x720, into steps of
+        # its own, so that the viewer's frames go on in between.
+        yield
         corners = (w + 1) * (h + 1)
         if self.budget - self.spent >= 2 * corners:
             colour, corner_t, corner_obj = yield from self._draws(self.sampler.corner_pass())
             self.spent += corners
-            flagged, contrast = self.flags(sums.mean, obj, colour, corner_t, corner_obj)
+            yield
+            flagged, contrast = yield from self._flag_steps(sums.mean, obj, colour, corner_t, corner_obj)
+            yield
         else:
             # A budget under 3 samples per pixel: the corner rays would take
             # most of what is left, so the centres' 3x3 neighbourhoods say
@@ -855,6 +875,7 @@ class AdaptiveRender:
             if not chosen.any():
                 break
             yield from self._upgrade(chosen)
+            yield
 
     def _upgrade(self, chosen: np.ndarray):
         """Take every chosen pixel from n to next_count(n) samples (at most
