@@ -30,7 +30,7 @@ from conftest import make_scene
 from viewer import adaptive as A
 from viewer.adaptive import (FIRST_ROUND, MAX_SPP_FACTOR, ROUND_FACTOR, AdaptiveRender, AdaptiveSampler, Sums,
                              checker_cells_differ, choose_by_gain, choose_within_budget, coherent_order,
-                             colour_contrast, corner_contrast, corner_directions, corner_objects_differ,
+                             colour_contrast, corner_contrast, corner_directions, corner_objects_differ, drain,
                              list_slots, list_width, next_count, own_error, prefix_error, render_adaptive,
                              sliver_error, spread_error, standard_error)
 from viewer.imageio import to_display8
@@ -556,13 +556,7 @@ def test_first_pass_counts_the_rays_of_the_cost_view(renderer_for):
     w, h = 48, 27
     sampler = AdaptiveSampler(r, w, h)
     try:
-        gen = sampler.first_pass((0.5, 0.5))
-        while True:
-            try:
-                next(gen)
-            except StopIteration as stop:
-                _, obj, rays = stop.value
-                break
+        _, obj, rays = drain(sampler.first_pass((0.5, 0.5)))
     finally:
         sampler.release()
     np.testing.assert_array_equal(rays, r.ray_cost(w, h))
@@ -1161,13 +1155,7 @@ def test_corner_rays_match_the_reference_tracer(renderer_for, name):
     w, h = 40, 24
     sampler = AdaptiveSampler(r, w, h)
     try:
-        gen = sampler.corner_pass()
-        while True:
-            try:
-                next(gen)
-            except StopIteration as stop:
-                colour, t, obj = stop.value
-                break
+        colour, t, obj = drain(sampler.corner_pass())
     finally:
         sampler.release()
     scene = r.scene

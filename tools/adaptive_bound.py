@@ -48,7 +48,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import adaptive_vs_uniform as avu  # noqa: E402
 
 from viewer import adaptive, bench  # noqa: E402
-from viewer.adaptive import AdaptiveRender, AdaptiveSampler, Sums  # noqa: E402
+from viewer.adaptive import AdaptiveRender, AdaptiveSampler, Sums, drain  # noqa: E402
 from viewer.sampling import progressive_offsets  # noqa: E402
 from viewer.scene import load_scene  # noqa: E402
 
@@ -56,14 +56,6 @@ W, H = avu.W, avu.H
 RECORD = 256                       # samples recorded per flagged pixel (max_spp at a budget of 32)
 SEEDS = tuple(range(101, 109))     # the other scrambles the expected error is taken over
 BUDGETS = (8, 12, 16, 20, 24, 32)
-
-
-def _drain(gen):
-    while True:
-        try:
-            next(gen)
-        except StopIteration as stop:
-            return stop.value
 
 
 class Recording:
@@ -74,8 +66,8 @@ class Recording:
         self.width, self.height, self.record = width, height, record
         job = AdaptiveRender(renderer, width, height, 16, seed=bench.RENDER_SEED)
         sampler = job.sampler
-        self.first = _drain(sampler.first_pass((0.5, 0.5)))
-        self.corners = _drain(sampler.corner_pass())
+        self.first = drain(sampler.first_pass((0.5, 0.5)))
+        self.corners = drain(sampler.corner_pass())
         sums = self.first[0]
         flagged, _ = job.flags(sums.mean, self.first[1], *self.corners)
         self.flat = job._coherent[flagged.ravel()[job._coherent]]
@@ -86,7 +78,7 @@ class Recording:
         L[:, 0] = sums.mean.reshape(-1, 3)[self.flat]
         ones = np.ones(m, np.int64)
         for k in range(1, record):
-            total, _ = _drain(sampler.add_samples(self.flat, k * ones, ones))
+            total, _ = drain(sampler.add_samples(self.flat, k * ones, ones))
             L[:, k] = total[:, :3]
         job.release()
         # cumulative sums: cum[:, n] = the sum of samples 0..n-1

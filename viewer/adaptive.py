@@ -378,6 +378,16 @@ def choose_within_budget(active: np.ndarray, error: np.ndarray, per_pixel: int, 
     return out
 
 
+def drain(gen):
+    """Run a generator of this module (a pass, the flags) to its end without
+    pausing: what it returns."""
+    while True:
+        try:
+            next(gen)
+        except StopIteration as stop:
+            return stop.value
+
+
 # ---------------------------------------------------------------- the GPU part
 
 #: Width of the pixel-list framebuffer (a multiple of LIST_BLOCK) and the
@@ -797,12 +807,7 @@ class AdaptiveRender:
               corner_obj: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(flagged (H, W) bool, contrast (H, W)) from the centre colours and
         first objects and the corner rays (module docstring, step 1)."""
-        gen = self._flag_steps(centre, obj, corner_colour, corner_t, corner_obj)
-        while True:
-            try:
-                next(gen)
-            except StopIteration as stop:
-                return stop.value
+        return drain(self._flag_steps(centre, obj, corner_colour, corner_t, corner_obj))
 
     def _flag_steps(self, centre, obj, corner_colour, corner_t, corner_obj):
         """flags() as a generator that yields between its parts (each about
