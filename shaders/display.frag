@@ -17,6 +17,12 @@ uniform vec2 accumSize;        // size of accumTex (equal to outSize, unless res
 uniform vec2 previewUsed;      // (pw / W, ph / H): the part of previewTex the preview fills
 uniform vec2 previewTexel;     // 1 / size of previewTex
 uniform int hasPreview;        // 0: no preview yet (show black where accum is empty)
+// DISPLAY_MODE 4: an adaptive round in flight.  roundSums is its pixel
+// list's target (sum of the round's new samples so far, count in alpha, at
+// list texel k = (k mod width, k / width)); roundTexel gives each pixel's k,
+// or -1 where the round does not sample the pixel.
+uniform sampler2D roundSums;
+uniform isampler2D roundTexel;
 
 out vec4 fragColor;
 
@@ -31,7 +37,8 @@ vec3 srgbEncode(vec3 x) {
 // preview where a pixel has none yet; 1 the preview only (used to encode the
 // preview once, at its own resolution, into an 8-bit texture); 2 the
 // accumulated samples only (every pixel has one); 3 the encoded preview,
-// scaled up (nothing accumulated yet: while things move).  The variants save
+// scaled up (nothing accumulated yet: while things move); 4 as 2, plus the
+// samples an adaptive round has traced so far.  The variants save
 // a software renderer the texture reads and the arithmetic it does not need.
 #ifndef DISPLAY_MODE
 #define DISPLAY_MODE 0
@@ -56,7 +63,14 @@ void main() {
 #else
     ivec2 texel = ivec2(floor(uv * accumSize));
     vec4 acc = texelFetch(accumTex, clamp(texel, ivec2(0), ivec2(accumSize) - 1), 0);
-#if DISPLAY_MODE == 2
+#if DISPLAY_MODE == 4
+    int k = texelFetch(roundTexel, clamp(texel, ivec2(0), ivec2(accumSize) - 1), 0).r;
+    if (k >= 0) {
+        int lw = textureSize(roundSums, 0).x;
+        acc += texelFetch(roundSums, ivec2(k % lw, k / lw), 0);
+    }
+#endif
+#if DISPLAY_MODE == 2 || DISPLAY_MODE == 4
     vec3 c = acc.rgb / max(acc.a, 1.0);
 #else
     vec3 c = acc.a > 0.0 ? acc.rgb / acc.a : previewColor(uv);

@@ -149,12 +149,31 @@ FLAT = {
 
 
 def accum_mean(p: Progressive) -> tuple[np.ndarray, np.ndarray]:
-    """What the display pass divides: accum_tex read back, top row first,
-    as (sum / count, count)."""
+    """What the display pass divides: accum_tex read back, plus, while an
+    adaptive round is in flight, what the display adds to it (the round's
+    list target at each pixel's texel), top row first, as (sum / count,
+    count)."""
     w, h = p.size
-    acc = np.frombuffer(p.accum_tex.read(), np.float32).reshape(h, w, 4)[::-1]
+    acc = np.frombuffer(p.accum_tex.read(), np.float32).reshape(h * w, 4).copy()
+    if p._showing_round:
+        sums_tex = p._overlay[1]
+        sums = np.frombuffer(sums_tex.read(), np.float32).reshape(-1, 4)
+        k = np.frombuffer(p._slot_tex.read(), np.int32)
+        acc[k >= 0] += sums[k[k >= 0]]
+    acc = acc.reshape(h, w, 4)[::-1]
     count = acc[..., 3]
     return acc[..., :3] / np.maximum(count, 1)[..., None], count
+
+
+def shown8(gl, p: Progressive) -> np.ndarray:
+    """The display pass's 8-bit output (H, W, 3) int, top row first."""
+    w, h = p.size
+    out = gl.simple_framebuffer((w, h), components=4)
+    try:
+        p.display(out, (0, 0, w, h))
+        return np.frombuffer(out.read(components=3), np.uint8).reshape(h, w, 3)[::-1].astype(int)
+    finally:
+        out.release()
 
 
 def run_adaptive(p: Progressive, budget_ms: float = 1e-3, limit: int = 10000) -> list[float]:
@@ -210,6 +229,37 @@ def test_adaptive_accumulation_equals_the_offscreen_adaptive_render(adaptive_set
     # another seed is another picture: the seed really reaches the render
     other = render_adaptive(r, w, h, 6, seed=4)
     assert not np.array_equal(other.image, p.image())
+
+
+def test_a_round_in_flight_is_shown_as_it_goes(adaptive_setup):
+    # A round's samples reach the window draw by draw (the display adds the
+    # round's list target on the GPU), not only when the round ends: at
+    # every frame the window shows the mean of every sample traced so far
+    # (p.image(), merged on the CPU from the job's own sums: another route)
+    # and the HUD's mean is the mean of the pixels' counts.
+    gl, scene, r, p = adaptive_setup
+    w, h = 40, 24
+    scene.render.samples = 16
+    r.set_scene(scene)
+    p.resize(w, h)
+    shown_in_rounds, states = 0, []
+    while not p.done:
+        p.accumulate(budget_ms=1e-3)
+        if not p.has_full_sample:
+            continue
+        image = p.image()
+        mean, count = accum_mean(p)
+        assert p.mean_spp == pytest.approx(count.mean(), abs=1e-9)
+        np.testing.assert_allclose(mean, image, rtol=1e-5, atol=1e-6)
+        assert np.abs(shown8(gl, p) - to_display8(image).astype(int)).max() <= 1
+        shown_in_rounds += p._showing_round
+        states.append(p.mean_spp)
+    rounds = len(p.job.rounds)
+    # more distinct pictures than passes: rounds are shown part by part
+    assert shown_in_rounds > rounds and len(set(states)) > rounds
+    drops = [(a, b) for a, b in zip(states, states[1:]) if b < a - 1e-9]
+    assert not drops
+    assert p.mean_spp == pytest.approx(p.job.spp.mean())
 
 
 def test_mean_spp_grows_to_at_most_samples_and_flat_regions_keep_one(gl):
@@ -322,10 +372,11 @@ def test_adaptive_screenshot_and_switching_modes(adaptive_setup):
     # a screenshot mid-way is the mean so far, the same as what is shown
     while p.mean_spp == 1.0:
         p.accumulate(budget_ms=1e-3)
-    assert not p.done
+    assert not p.done and p._showing_round  # the first round is in flight
     mean, count = accum_mean(p)
     assert count.max() > 1
     np.testing.assert_allclose(p.image(), mean, rtol=1e-5, atol=1e-6)
+    assert np.abs(shown8(gl, p) - to_display8(p.image()).astype(int)).max() <= 1
     assert not np.array_equal(p.image(), one)
     p.finish_pass()  # nothing to do: every pixel has a sample
     assert p.mean_spp == pytest.approx(count.mean())

@@ -505,6 +505,7 @@ class AdaptiveSampler:
         #: the viewer can fit draws into its frame budget as it goes
         self.fragments_per_draw = FRAGMENTS_PER_DRAW
         self.last_draw_fragments = 0     # pixel-samples the latest draw traced
+        self._in_flight = None           # (list framebuffer, texel of each entry) during add_samples
 
     def _programs(self, defines: dict) -> list[tuple[moderngl.Program, tuple]]:
         """The renderer's (program, rectangles) pairs of these variant
@@ -658,8 +659,7 @@ class AdaptiveSampler:
         yields after each draw call (the viewer's frames, progress, Ctrl-C)
         and returns the sums (total (n, 4) = sum (L, 1), square (n,) = sum
         L.L) in the order of `pixels`."""
-        ctx, w = self.ctx, self.width
-        n = len(pixels)
+        w = self.width
         lw, lh, runs, slot = self._layout(pixels, count)
         tex, fbo = self._list_target(lw, lh)
         entries = np.full((lh * lw, 4), -1, np.int32)
@@ -667,6 +667,48 @@ class AdaptiveSampler:
         tex.write(entries.tobytes())               # row 0 of the texture = list row 0
         fbo.use()
         fbo.clear(0.0, 0.0, 0.0, 0.0)
+        self._in_flight = (fbo, slot)
+        try:
+            # entries in list rows 0 .. r-1: filled[r] (a draw's exact pixel count)
+            filled = np.concatenate([[0], np.cumsum(np.bincount(slot // lw, minlength=lh))])
+            yield from self._list_draws(tex, fbo, runs, lw, filled)
+        finally:
+            self._in_flight = None
+        return self._list_sums(fbo, slot)
+
+    def sums_so_far(self) -> np.ndarray | None:
+        """Between the yields of add_samples: total (n, 4) = sum (L, 1) of
+        the samples its draws have traced so far, in the order of its
+        pixels (0 where none yet); None outside add_samples.  (The viewer
+        shows a pass's pixels as they improve, not only when it ends.)"""
+        if self._in_flight is None:
+            return None
+        fbo, slot = self._in_flight
+        return self._list_sums(fbo, slot, square=False)[0]
+
+    def sums_target(self):
+        """Between the yields of add_samples: (the list target's sums
+        texture, RGBA32F: sum (L, 1) of the samples traced so far at each
+        texel; the texel index of each of its pixels); None outside it."""
+        if self._in_flight is None:
+            return None
+        fbo, slot = self._in_flight
+        return fbo.color_attachments[0], slot
+
+    @staticmethod
+    def _list_sums(fbo, slot, square: bool = True):
+        """The list targets' sums at the texels `slot`: (total (n, 4),
+        square (n,) or None), float64."""
+        size = fbo.size[0] * fbo.size[1]
+        total = np.frombuffer(fbo.read(attachment=0, components=4, dtype="f4"), np.float32).reshape(size, 4)[slot]
+        if not square:
+            return total.astype(np.float64), None
+        sq = np.frombuffer(fbo.read(attachment=1, components=1, dtype="f4"), np.float32)[slot]
+        return total.astype(np.float64), sq.astype(np.float64)
+
+    def _list_draws(self, tex, fbo, runs, lw, filled):
+        """add_samples' draw calls, a yield after each."""
+        ctx, w = self.ctx, self.width
         for g, samples, row0, rows, length in runs:
             k0 = 0
             while k0 < samples:
@@ -695,16 +737,13 @@ class AdaptiveSampler:
                     try:
                         self.renderer.vao_of(prog).render(moderngl.TRIANGLES, vertices=3)
                         ctx.finish()
-                        self.last_draw_fragments = min(cut * lw, length) * batch
+                        self.last_draw_fragments = int(filled[y + cut] - filled[y]) * batch
                     finally:
                         ctx.scissor = None
                         ctx.disable(moderngl.BLEND)
                     y += cut
                     yield
                 k0 += batch
-        total, square = (np.frombuffer(fbo.read(attachment=a, components=c, dtype="f4"), np.float32)
-                         .reshape(lh * lw, c)[slot] for a, c in ((0, 4), (1, 1)))
-        return total.astype(np.float64), square[:, 0].astype(np.float64)
 
     def _release_list(self) -> None:
         for obj in (self._list_fbo, self._list_tex, *self._list_targets):
@@ -757,6 +796,8 @@ class AdaptiveRender:
         self.draws_done = 0
         self.steps_done = 0               # step() calls: draw calls and the bookkeeping between passes
         self.rounds: list[tuple[int, int]] = []
+        self._upgrading = None            # (pixels, their sums before it) while a round's draws run
+        self.round_traced = 0             # pixel-samples the round in flight has traced so far
         self.done = False
         self._gen = self._run()
 
@@ -787,9 +828,43 @@ class AdaptiveRender:
     def spp(self) -> np.ndarray:
         return np.rint(self.total[..., 3]).astype(np.int32)
 
+    def in_flight(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """While a round's draws run (between steps): (flat pixel indices,
+        their sums (n, 4) = sum (L, 1) with what the round's draws so far
+        traced); None between rounds.  `total` gets them when the round
+        ends; a sampler without sums_so_far shows none before that."""
+        so_far = getattr(self.sampler, "sums_so_far", None)
+        if self._upgrading is None or so_far is None:
+            return None
+        got = so_far()
+        if got is None:
+            return None
+        flat, old = self._upgrading
+        return flat, old + got
+
+    def round_target(self):
+        """While a round's draws run: (its flat pixel indices, the texture
+        of their new sums so far, the texel of each pixel in it) -- see
+        AdaptiveSampler.sums_target -- for a display that adds them to
+        `total` on the GPU; None between rounds or with a sampler that has
+        no such texture."""
+        target = getattr(self.sampler, "sums_target", None)
+        if self._upgrading is None or target is None:
+            return None
+        got = target()
+        if got is None:
+            return None
+        return (self._upgrading[0],) + got
+
     def image(self) -> np.ndarray:
-        """(H, W, 3) float32: the mean of each pixel's samples so far."""
-        return (self.total[..., :3] / np.maximum(self.total[..., 3:], 1)).astype(np.float32)
+        """(H, W, 3) float32: the mean of each pixel's samples so far (a
+        round's draws included while it runs)."""
+        total = self.total
+        moving = self.in_flight()
+        if moving is not None:
+            total = total.copy()
+            total.reshape(-1, 4)[moving[0]] = moving[1]
+        return (total[..., :3] / np.maximum(total[..., 3:], 1)).astype(np.float32)
 
     def result(self) -> "AdaptiveResult":
         return AdaptiveResult(np.ascontiguousarray(self.image()), self.spp, list(self.rounds), self.spent)
@@ -892,7 +967,12 @@ class AdaptiveRender:
         old = total[flat]
         n = np.rint(old[:, 3]).astype(np.int64)
         more = np.minimum(next_count(n), self.max_spp) - n
-        tot, sq = yield from self._draws(self.sampler.add_samples(flat, n, more))
+        self._upgrading = (flat, old)
+        self.round_traced = 0
+        try:
+            tot, sq = yield from self._draws(self.sampler.add_samples(flat, n, more))
+        finally:
+            self._upgrading = None
         sums = Sums(old + tot, square[flat] + sq)
         total[flat] = sums.total
         square[flat] = sums.square
@@ -918,6 +998,7 @@ class AdaptiveRender:
             except StopIteration as stop:
                 return stop.value
             self.draws_done += 1
+            self.round_traced += getattr(self.sampler, "last_draw_fragments", 0)
             yield
 
 

@@ -16,8 +16,12 @@ framebuffers and shows the result in whatever framebuffer it is given.
   the same frame-time budget; its first step traces sample 0 of every pixel,
   later ones only the pixels that still need samples (``samples`` is then
   the mean per pixel).  Its sums (rgb, count) are uploaded into the same
-  accumulation texture whenever they change, so the display pass is the
-  same; a finished adaptive view equals ``render_adaptive`` for the seed.
+  accumulation texture when a pass ends, so the display pass is the same;
+  while a round of added samples runs (seconds at 1280x720), the display
+  also adds the sums its draws have traced so far, straight from the
+  round's pixel-list target (DISPLAY_MODE 4: nothing read back), so the
+  picture improves frame by frame.  A finished adaptive view equals
+  ``render_adaptive`` for the seed.
 * Preview: one centred sample per pixel at a reduced resolution chosen from
   the measured cost per pixel so that a frame holds the target frame time;
   shown (upscaled) wherever the accumulation has no sample yet.
@@ -67,6 +71,9 @@ class Progressive:
         self.job: AdaptiveRender | None = None
         self._uploaded_spent = 0
         self._uploaded_mean = 0.0
+        self._uploaded_draws = 0    # the job's draws_done when accum_tex or the overlay was last updated
+        self._overlay = None        # (a round's pixels, its sums texture): what the display adds to accum_tex
+        self._slot_tex = None       # (W, H) R32I: each pixel's texel in that texture, -1 if not in the round
         self._step_s = 0.0  # duration of the latest adaptive step (predicts the next one)
         self.uploads = 0  # times accum_tex got new adaptive sums (the viewer shows them at once)
 
@@ -117,7 +124,10 @@ class Progressive:
         if w * h == 0:
             return 0.0
         if self._adaptive:
-            return self._uploaded_mean if self.job is not None else 0.0
+            if self.job is None:
+                return 0.0
+            # and the pixel-samples of a round in flight so far
+            return self._uploaded_mean + (self.job.round_traced / (w * h) if self._showing_round else 0.0)
         return self.passes_done + self.next_row / h
 
     @property
@@ -174,8 +184,13 @@ class Progressive:
         if self.job is not None:
             self.job.release()
             self.job = None
+        self._reset_upload()
+
+    def _reset_upload(self) -> None:
         self._uploaded_spent = 0
         self._uploaded_mean = 0.0
+        self._uploaded_draws = 0
+        self._overlay = None
 
     # ------------------------------------------------------------ tracing
 
@@ -279,8 +294,7 @@ class Progressive:
         w, h = self.size
         if self.job is None:
             self.job = AdaptiveRender(self.renderer, w, h, self.samples, seed=self.seed)
-            self._uploaded_spent = 0
-            self._uploaded_mean = 0.0
+            self._reset_upload()
         job = self.job
         budget = (self.target_ms if budget_ms is None else budget_ms) / 1000.0
         t_start = time.perf_counter()
@@ -328,16 +342,49 @@ class Progressive:
 
     def _upload(self) -> None:
         """The adaptive sums into accum_tex (rows bottom first: rgb sums,
-        count in alpha), when they changed since the last upload."""
+        count in alpha) when a pass has ended; while a round runs, the
+        display adds the sums of its draws so far from the sampler's list
+        target on the GPU (a round at 1280x720 takes seconds: the picture
+        improves frame by frame, not in jumps, and nothing is read back)."""
         job = self.job
-        if job is None or job.spent == self._uploaded_spent:
+        if job is None:
             return
-        self.accum_tex.write(np.ascontiguousarray(job.total[::-1], dtype=np.float32).tobytes())
-        self._uploaded_spent = job.spent
-        # the samples in the pixels' means (the corner rays the adaptive
-        # render also traces are in `spent`, not in any pixel)
-        self._uploaded_mean = float(job.total[..., 3].mean())
+        if job.spent != self._uploaded_spent:
+            self.accum_tex.write(np.ascontiguousarray(job.total[::-1], dtype=np.float32).tobytes())
+            self._uploaded_spent = job.spent
+            # the samples in the pixels' means (the corner rays the adaptive
+            # render also traces are in `spent`, not in any pixel)
+            self._uploaded_mean = float(job.total[..., 3].mean())
+            self._overlay = None
+            self.uploads += 1
+        target = job.round_target()
+        if target is None:
+            self._overlay = None       # between passes, or the first or corner pass: shown when it ends
+            return
+        flat, sums_tex, slot = target
+        if self._overlay is not None and self._overlay[0] is flat and job.draws_done == self._uploaded_draws:
+            return
+        if self._overlay is None or self._overlay[0] is not flat:
+            # a new round: which texel of its list each pixel's sums are in
+            w, h = self.size
+            texel = np.full(w * h, -1, np.int32)
+            texel[(h - 1 - flat // w) * w + flat % w] = slot
+            if self._slot_tex is None:
+                self._slot_tex = self.ctx.texture((w, h), 1, dtype="i4")
+                self._slot_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+            self._slot_tex.write(texel.tobytes())
+        self._overlay = (flat, sums_tex)
+        self._uploaded_draws = job.draws_done
         self.uploads += 1
+
+    @property
+    def _showing_round(self) -> bool:
+        """The display adds a round in flight (its list target) to accum_tex."""
+        job = self.job
+        if self._overlay is None or job is None or job.done or job.spent != self._uploaded_spent:
+            return False
+        target = job.round_target()
+        return target is not None and target[0] is self._overlay[0] and target[1] is self._overlay[1]
 
     def finish_pass(self) -> None:
         """Complete the current full-resolution sample if none is complete
@@ -373,7 +420,7 @@ class Progressive:
         """The display programs, one per DISPLAY_MODE (see display.frag)."""
         progs, vaos = [], []
         try:
-            for mode in (0, 1, 2, 3):
+            for mode in (0, 1, 2, 3, 4):
                 progs.append(build_program(self.ctx, fragment="display.frag", vertex="fullscreen.vert",
                                            defines={"DISPLAY_MODE": mode}))
                 vaos.append(self.ctx.vertex_array(progs[-1], []))
@@ -394,7 +441,7 @@ class Progressive:
             self.ctx.clear(0.0, 0.0, 0.0, 1.0)
             return
         if self.has_full_sample:
-            mode = 2  # every pixel has a sample
+            mode = 4 if self._showing_round else 2  # every pixel has a sample (and a round adds more)
         elif (self.started and not self._adaptive) or self.preview_size is None:
             mode = 0  # the first sample is on its way
         else:
@@ -412,9 +459,13 @@ class Progressive:
         prog = self.programs[mode]
         self.accum_tex.use(location=0)
         (self.preview8_tex if mode == 3 else self.preview_tex).use(location=1)
+        if mode == 4:
+            self._overlay[1].use(location=2)
+            self._slot_tex.use(location=3)
         for name, value in (("accumTex", 0), ("previewTex", 1), ("outSize", (float(viewport[2]), float(viewport[3]))),
                             ("accumSize", (float(w), float(h))), ("previewUsed", (pw / w, ph / h)),
-                            ("previewTexel", (1.0 / w, 1.0 / h)), ("hasPreview", int(self.preview_size is not None))):
+                            ("previewTexel", (1.0 / w, 1.0 / h)), ("hasPreview", int(self.preview_size is not None)),
+                            ("roundSums", 2), ("roundTexel", 3)):
             if name in prog:
                 prog[name].value = value
         self.vaos[mode].render(moderngl.TRIANGLES, vertices=3)
@@ -434,9 +485,10 @@ class Progressive:
 
     def _release_targets(self) -> None:
         for obj in (self.accum_fbo, self.accum_tex, self.preview_fbo, self.preview_tex, self.preview8_fbo,
-                    self.preview8_tex):
+                    self.preview8_tex, self._slot_tex):
             if obj is not None:
                 obj.release()
+        self._slot_tex = self._overlay = None
         self.accum_fbo = self.accum_tex = self.preview_fbo = self.preview_tex = None
         self.preview8_fbo = self.preview8_tex = None
 
