@@ -107,7 +107,10 @@ def test_same_seed_same_image(tmp_path):
     ["render", "-o", "x.png", "--backend", "vulkan"],
     ["render"],                                                  # -o is required
     ["render", "-o", "x.png", "--bogus"],
+    ["render", "-o", "x.png", "--size", "-16x9"],                # a size with a minus is a bad size
     ["check", "no-such-scene.toml"],
+    ["check", ""],                                               # an empty scene path
+    ["check", "a.toml", "b.toml"],
 ])
 def test_bad_usage_exits_2_with_one_message(tmp_path, args):
     r = glassray(*args, cwd=tmp_path)
@@ -115,6 +118,95 @@ def test_bad_usage_exits_2_with_one_message(tmp_path, args):
     assert "Traceback" not in r.stderr
     assert r.stderr.strip()
     assert not (tmp_path / "x.png").exists()
+
+
+@pytest.mark.parametrize("args, says", [
+    (["render", "-o", "x.png", "--bogus"], "glassray render: error: unrecognized arguments: --bogus"),
+    (["check", "a.toml", "b.toml"], "glassray check: error: unrecognized arguments: b.toml"),
+    (["render", "-o", "x.png", "--size", "-16x9"], "width and height must be in 1..16384, got '-16x9'"),
+    (["check", ""], "empty scene path"),
+    (["render", "-o", "x", "--size", "8x8"], "x: no output extension (expected .png, .npy or .pfm)"),
+    (["render", "-o", "x.jpg", "--size", "8x8"], "x.jpg: unknown output extension '.jpg'"),
+])
+def test_usage_messages_say_what_is_wrong(tmp_path, args, says):
+    # leftover arguments are reported with the subcommand's own usage line
+    r = glassray(*args, cwd=tmp_path)
+    assert r.returncode == 2 and says in r.stderr, r.stderr
+    usage = [line for line in r.stderr.splitlines() if line.startswith("usage:")]
+    assert not usage or usage[0].startswith(f"usage: glassray {args[0]} ")
+
+
+def test_output_under_a_file_says_the_folder_is_a_file(tmp_path):
+    (tmp_path / "base.png").write_bytes(b"old")
+    r = glassray("render", "-o", tmp_path / "base.png" / "x.png", "--size", "8x8")
+    assert r.returncode == 1 and "base.png is a file, not a folder" in r.stderr
+    assert (tmp_path / "base.png").read_bytes() == b"old"
+
+
+def test_a_read_only_output_file_is_not_replaced(tmp_path, monkeypatch, capsys):
+    # The atomic write (a rename) could replace a read-only file; it must
+    # fail as a plain write would.  os.access is what the check asks (root
+    # would pass it, so it is answered here as for another user).
+    from viewer import cli
+
+    old = tmp_path / "x.png"
+    old.write_bytes(b"old")
+    real = os.access
+    monkeypatch.setattr(cli.os, "access", lambda p, mode: False if Path(p) == old else real(p, mode))
+    assert cli.main(["render", "-o", str(old), "--size", "8x8"]) == 1
+    assert "x.png: cannot write: the file is read-only" in capsys.readouterr().err
+    assert old.read_bytes() == b"old"
+
+
+def test_view_checks_the_scene_before_the_display(tmp_path):
+    # a bad scene is exit 2 in every subcommand, also without a display
+    env = {"DISPLAY": "", "WAYLAND_DISPLAY": ""}
+    r = glassray("view", tmp_path / "missing.toml", env=env)
+    assert r.returncode == 2 and "missing.toml" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_the_progress_bar_waits_for_a_long_render_and_is_erased(monkeypatch):
+    import io
+
+    from viewer import cli
+
+    class Tty(io.StringIO):
+        def isatty(self):
+            return True
+
+    clock = [100.0]
+    monkeypatch.setattr(cli.time, "perf_counter", lambda: clock[0])
+    for long in (False, True):
+        err = Tty()
+        monkeypatch.setattr(cli.sys, "stderr", err)
+        show = cli._progress_bar("render 8x8")
+        show(1, 4)                                 # at once: nothing yet
+        assert err.getvalue() == ""
+        if long:
+            clock[0] += 2 * cli.PROGRESS_AFTER_S
+            show(2, 4)
+            assert "render 8x8 [" in err.getvalue() and "50.0%" in err.getvalue()
+        show(4, 4)
+        out = err.getvalue()
+        # a short render draws nothing; a long one ends on an erased line,
+        # so that what follows (the --timing line) is the only text left
+        assert out == "" if not long else out.endswith("\r") and out.rsplit("\r", 2)[1].strip() == ""
+
+
+def test_a_tiny_directional_light_direction_lights_as_any_other_length(tmp_path):
+    # non-zero is all the spec asks; 1e-320 must not underflow to a zero length
+    scene = ('[materials.m]\n[[objects]]\ntype = "sphere"\ncenter = [0, 0.9, 0]\nradius = 0.5\nmaterial = "m"\n'
+             '[[lights]]\ntype = "directional"\ndirection = {d}\n')
+    images = []
+    for d in ("[1e-320, -1e-320, 0]", "[1, -1, 0]", "[1e300, -1e300, 0]"):
+        f = tmp_path / "s.toml"
+        f.write_text(scene.format(d=d))
+        r = glassray("render", f, "-o", tmp_path / "s.npy", "--size", "32x18", "--samples", "1")
+        assert r.returncode == 0, r.stderr
+        images.append(np.load(tmp_path / "s.npy"))
+    assert np.isfinite(images[1]).all() and images[1].max() > 0.5
+    for img in images:
+        np.testing.assert_array_equal(img, images[1])
 
 
 def test_invalid_scene_exits_2_naming_file_and_key(tmp_path):
@@ -179,7 +271,7 @@ def test_check_prints_a_one_line_summary():
     assert r.returncode == 0
     line = r.stdout.strip()
     assert len(line.splitlines()) == 1
-    assert "5 objects" in line and "dielectric" in line and "absorption" in line
+    assert "5 objects" in line and "1 light;" in line and "dielectric" in line and "absorption" in line
     r = glassray("check", "mirror-ball")
     assert r.returncode == 0 and "dielectric" not in r.stdout and "reflection" in r.stdout
 

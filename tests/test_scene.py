@@ -11,6 +11,7 @@ import copy
 import math
 import os
 import re
+import struct
 import tomllib
 from dataclasses import replace
 from pathlib import Path
@@ -790,17 +791,75 @@ def test_image_sky_keeps_the_other_keys_too(tmp_path, monkeypatch):
     assert Path(s.sky.image_path).resolve() == (env / "sky.pfm").resolve()
 
 
+def write_picture(path: Path, value: float = 0.5) -> None:
+    """A real 8x4 picture of one grey `value` (0..1) in the format its
+    extension names (PFM: linear; the others: 8-bit sRGB-encoded)."""
+    import numpy as np
+    from PIL import Image
+
+    from viewer.imageio import encode_pfm
+
+    if path.suffix.lower() == ".pfm":
+        path.write_bytes(encode_pfm(np.full((4, 8, 3), value, np.float32)))
+    else:
+        fmt = "JPEG" if path.suffix.lower() in (".jpg", ".jpeg") else "PNG"
+        Image.fromarray(np.full((4, 8, 3), round(255 * value), np.uint8)).save(path, format=fmt)
+
+
 @pytest.mark.parametrize("name", ["sky.png", "sky.jpg", "sky.jpeg", "sky.pfm", "SKY.PNG"])
 def test_image_sky_formats(tmp_path, name):
-    (tmp_path / name).write_bytes(b"\0")
+    write_picture(tmp_path / name)
     s = load_text(tmp_path, f'[sky]\ntype = "image"\nimage = "{name}"\n')
     assert Path(s.sky.image_path).resolve() == (tmp_path / name).resolve()
+
+
+def _pfm_header(w: int, h: int) -> bytes:
+    return f"PF\n{w} {h}\n-1.0\n".encode()
+
+
+@pytest.mark.parametrize("name, content, says", [
+    ("garbage.png", b"this is not a png", "cannot decode"),
+    ("garbage.jpg", b"\xff\xd8 not a jpeg", "cannot decode"),
+    ("short.pfm", _pfm_header(8, 4) + bytes(48), "truncated PFM: 8x4 needs 384 bytes"),
+    ("header.pfm", b"P7\n8 4\n-1.0\n" + bytes(384), "not a PFM file"),
+    ("empty.pfm", b"", "not a PFM file"),
+    ("nan.pfm", _pfm_header(2, 1) + struct.pack("<6f", 0.5, float("nan"), 0.5, 0.5, 0.5, 0.5), "finite and >= 0"),
+    ("neg.pfm", _pfm_header(2, 1) + struct.pack("<6f", 0.5, 0.5, 0.5, 0.5, -1.0, 0.5), "finite and >= 0"),
+    ("inf.pfm", _pfm_header(2, 1) + struct.pack("<6f", float("inf"), 0.5, 0.5, 0.5, 0.5, 0.5), "finite and >= 0"),
+])
+def test_a_sky_picture_that_cannot_be_used_is_a_bad_scene(tmp_path, name, content, says):
+    # the picture is decoded and checked when the scene is, so check fails
+    # (exit 2) rather than a render later (exit 1, or NaN pixels)
+    (tmp_path / name).write_bytes(content)
+    with pytest.raises(SceneError) as e:
+        load_text(tmp_path, f'[sky]\ntype = "image"\nimage = "{name}"\n')
+    msg = str(e.value)
+    assert "sky.image" in msg and name in msg and says in msg
+
+
+def test_a_folder_named_like_a_picture_is_not_one(tmp_path):
+    (tmp_path / "dir.png").mkdir()
+    with pytest.raises(SceneError, match=r"sky\.image: .*dir\.png is a folder, not a picture"):
+        load_text(tmp_path, '[sky]\ntype = "image"\nimage = "dir.png"\n')
+
+
+def test_a_16_bit_png_sky_keeps_its_depth(tmp_path):
+    import numpy as np
+    from PIL import Image
+
+    from viewer.imageio import read_sky_image
+
+    Image.fromarray(np.full((2, 4), 40000, np.uint16)).save(tmp_path / "deep.png")
+    img = read_sky_image(tmp_path / "deep.png")
+    # sRGB-decoded 40000 / 65535 (PIL's 8-bit conversion would clip it to 1.0)
+    expected = ((40000 / 65535 + 0.055) / 1.055) ** 2.4
+    np.testing.assert_allclose(img, expected, rtol=1e-6)
 
 
 def test_image_sky_absolute_path(tmp_path):
     pic = tmp_path / "pics" / "sky.png"
     pic.parent.mkdir()
-    pic.write_bytes(b"\0")
+    write_picture(pic)
     sub = tmp_path / "scenes"
     sub.mkdir()
     s = load_text(sub, f'[sky]\ntype = "image"\nimage = "{pic.as_posix()}"\n')
@@ -1217,3 +1276,29 @@ def test_features_of_builtins_are_consistent(name):
     assert f"sky:{s.sky.type}" in f
     for o in s.objects:
         assert o.type in f
+
+
+def test_far_apart_camera_points_are_not_taken_for_equal(tmp_path):
+    # target - position overflows a double; the points still differ and the
+    # view is along +x
+    s = load_text(tmp_path, "[camera]\nposition = [-1e308, 0, 0]\ntarget = [1e308, 0, 0]\n")
+    assert s.camera.target == (1e308, 0.0, 0.0)
+    with pytest.raises(SceneError, match="straight up or down"):
+        load_text(tmp_path, "[camera]\nposition = [0, -1e308, 0]\ntarget = [0, 1e308, 0]\n")
+
+
+@pytest.mark.parametrize("v", [(1e-320, -1e-320, 0.0), (3.0, 4.0, 0.0), (1e308, 1e308, -1e308), (0.0, 0.0, -5e-324)])
+def test_unit_vector_neither_underflows_nor_overflows(v):
+    u = scene_mod.unit_vector(v)
+    assert math.isclose(math.hypot(*u), 1.0, rel_tol=1e-15)
+    # the same direction: u is a positive multiple of v
+    k = max(range(3), key=lambda i: abs(v[i]))
+    assert all(math.isclose(u[i], v[i] / v[k] * u[k], rel_tol=1e-12, abs_tol=1e-300) for i in range(3))
+
+
+def test_an_unknown_key_names_the_type_it_was_checked_for(tmp_path):
+    with pytest.raises(SceneError, match=r'lights\[0\]\.direction: unknown key for a "point" light \(the default type\)'):
+        load_text(tmp_path, "[[lights]]\ndirection = [1, -1, 0]\n")
+    with pytest.raises(SceneError, match=r'objects\[0\]\.height: unknown key for a "sphere"'):
+        load_text(tmp_path, '[materials.m]\n[[objects]]\ntype = "sphere"\ncenter = [0, 0, 0]\nradius = 1\n'
+                            'height = 2\nmaterial = "m"\n')

@@ -20,6 +20,9 @@ import numpy as np
 
 SUBCOMMANDS = ("view", "render", "check", "bench", "stress")
 VECTOR_OPTIONS = ("--camera-position", "--camera-target", "--light-position")
+#: Options whose value may start with a minus (argparse would take it for an
+#: option): the vectors, and --size, whose range message is then the one shown.
+DASH_VALUE_OPTIONS = VECTOR_OPTIONS + ("--size",)
 
 
 class UsageError(Exception):
@@ -182,6 +185,7 @@ def build_parser() -> argparse.ArgumentParser:
         elif name == "bench":
             b.add_argument("scene", nargs="?", metavar="SCENE")
         _add_common(b)
+    parser.subcommands = sub.choices      # name -> its parser (main() reports leftovers with it)
     return parser
 
 
@@ -198,13 +202,13 @@ def _optional_module(name: str):
 
 
 def normalise_argv(argv: list[str]) -> list[str]:
-    """Default subcommand and vector values with a leading minus:
+    """Default subcommand and vector (and size) values with a leading minus:
     ``--camera-position -1,2,3`` becomes ``--camera-position=-1,2,3``."""
     out: list[str] = []
     i = 0
     while i < len(argv):
         a = argv[i]
-        if a in VECTOR_OPTIONS and i + 1 < len(argv) and argv[i + 1].startswith("-") and argv[i + 1][1:2] not in ("-", ""):
+        if a in DASH_VALUE_OPTIONS and i + 1 < len(argv) and argv[i + 1].startswith("-") and argv[i + 1][1:2] not in ("-", ""):
             out.append(f"{a}={argv[i + 1]}")
             i += 2
             continue
@@ -229,20 +233,35 @@ def _load(args) -> "object":
     return with_overrides(scene, **overrides)
 
 
+#: A render shows its progress bar once it has taken this long.
+PROGRESS_AFTER_S = 0.5
+
+
 def _progress_bar(label: str):
+    """A progress callback drawing a bar on stderr when it is a terminal:
+    only for renders longer than PROGRESS_AFTER_S (a short one stays quiet),
+    and erased when done (so --timing leaves its one line)."""
     if not sys.stderr.isatty():
         return None
     start = time.perf_counter()
+    shown = [0]                               # width of the line drawn (0: none)
 
     def show(done: int, total: int) -> None:
         frac = done / total
-        bar = "#" * int(30 * frac)
         elapsed = time.perf_counter() - start
+        if done >= total:
+            if shown[0]:
+                sys.stderr.write("\r" + " " * shown[0] + "\r")
+                sys.stderr.flush()
+            return
+        if elapsed < PROGRESS_AFTER_S:
+            return
+        bar = "#" * int(30 * frac)
         eta = elapsed / frac - elapsed if frac > 0 else 0.0
-        sys.stderr.write(f"\r{label} [{bar:<30}] {100 * frac:5.1f}%  {elapsed:5.1f}s  eta {eta:5.1f}s")
-        if done == total:
-            sys.stderr.write("\n")
+        line = f"{label} [{bar:<30}] {100 * frac:5.1f}%  {elapsed:5.1f}s  eta {eta:5.1f}s"
+        sys.stderr.write("\r" + line)
         sys.stderr.flush()
+        shown[0] = max(shown[0], len(line))
     return show
 
 
@@ -263,14 +282,19 @@ def cmd_render(args) -> int:
 
     out = Path(args.output)
     if out.suffix.lower() not in OUTPUT_EXTENSIONS:
-        raise UsageError(f"{args.output}: unknown output extension {out.suffix or '(none)'!r} "
-                         f"(expected .png, .npy or .pfm)")
+        what = f"unknown output extension {out.suffix!r}" if out.suffix else "no output extension"
+        raise UsageError(f"{args.output}: {what} (expected .png, .npy or .pfm)")
     scene = _load(args)
     parent = out.parent if str(out.parent) else Path(".")
     if not parent.is_dir():
-        raise Failure(f"{args.output}: cannot write: folder {parent} does not exist")
+        what = "is a file, not a folder" if parent.exists() else "does not exist"
+        raise Failure(f"{args.output}: cannot write: folder {parent} {what}")
     if not os.access(parent, os.W_OK):
         raise Failure(f"{args.output}: cannot write: folder {parent} is not writable")
+    # the atomic write (a rename) would replace a read-only file: refuse, as a
+    # plain open() would
+    if out.is_file() and not os.access(out, os.W_OK):
+        raise Failure(f"{args.output}: cannot write: the file is read-only")
 
     adaptive = _adaptive(args)
     if args.view == "samples" and not adaptive:      # bad usage: before any OpenGL
@@ -377,10 +401,10 @@ def cmd_check(args) -> int:
 
 
 def cmd_view(args) -> int:
+    _load(args)  # a bad scene is exit 2, as in every subcommand, display or not
     if not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
         raise Failure("no display: the viewer needs a window (DISPLAY is not set). "
                       "Render offscreen instead: glassray render -o out.png")
-    _load(args)  # a bad scene is exit 2 even here
     try:
         from . import app
     except ImportError as e:
@@ -408,7 +432,10 @@ COMMANDS = {"view": cmd_view, "render": cmd_render, "check": cmd_check,
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     parser = build_parser()
-    args = parser.parse_args(normalise_argv(argv))
+    args, extra = parser.parse_known_args(normalise_argv(argv))
+    if extra:
+        # as parse_args would, but with the subcommand's usage line
+        parser.subcommands.get(args.command, parser).error(f"unrecognized arguments: {' '.join(extra)}")
     if args.command is None:
         parser.print_help()
         return 0

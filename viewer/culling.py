@@ -39,7 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .gpu_scene import bounding_sphere, camera_uniforms, contains_point, scene_scale
-from .scene import Scene
+from .scene import Scene, unit_vector
 
 #: Tile side in pixels.
 TILE = 32
@@ -155,7 +155,7 @@ def tile_subsets(scene: Scene, width: int, height: int, tile: int = TILE) -> tup
                     for c, rad in regions:
                         for lt in lights:
                             if lt.type == "directional":
-                                dist = _segment_distance(centres, c, None, -np.array(lt.direction, float))
+                                dist = _segment_distance(centres, c, None, -np.array(unit_vector(lt.direction)))
                             else:
                                 dist = _segment_distance(centres, c, np.array(lt.position, float), None)
                             hit = bounded & (dist < radii + rad)

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .scene import Scene, SceneObject
+from .scene import Scene, SceneObject, unit_vector
 
 OBJ_TYPES = {"plane": 0, "sphere": 1, "box": 2, "cylinder": 3}
 SKY_TYPES = {"color": 0, "gradient": 1, "image": 2}
@@ -246,8 +246,7 @@ def pack_scene(scene: Scene, specialise: bool = True, fresnel: str = "exact") ->
         if lt.type == "point":
             lights[j]["vector"] = (*(np.array(lt.position) - eye), 0.0)
         else:
-            d = np.array(lt.direction, dtype=np.float64)
-            lights[j]["vector"] = (*(d / np.linalg.norm(d)), 1.0)
+            lights[j]["vector"] = (*unit_vector(lt.direction), 1.0)
         lights[j]["radiance"][:3] = np.array(lt.color) * lt.intensity
 
     tail = np.zeros(1, TAIL_DTYPE)

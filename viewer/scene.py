@@ -169,8 +169,8 @@ class Scene:
         return feats
 
     def summary(self) -> str:
-        return (f"{self.name}: {len(self.objects)} objects, {len(self.materials)} materials, "
-                f"{len(self.lights)} lights; features: {', '.join(self.features())}")
+        return (f"{self.name}: {_count(self.objects, 'object')}, {_count(self.materials, 'material')}, "
+                f"{_count(self.lights, 'light')}; features: {', '.join(self.features())}")
 
 
 # --------------------------------------------------------------------------- validation
@@ -193,10 +193,13 @@ def _join(path: str, key: str | int) -> str:
     return f"{path}.{key}" if path else key
 
 
-def _check_keys(ctx: _Ctx, path: str, table: dict, allowed: set[str]) -> None:
+def _check_keys(ctx: _Ctx, path: str, table: dict, allowed: set[str], kind: str = "") -> None:
+    """Every key of `table` in `allowed`; `kind` names what the keys depend
+    on (for example 'for a "point" light', whose type may be the default)."""
     for key in table:
         if key not in allowed:
-            raise ctx.fail(_join(path, key), f"unknown key (expected one of: {', '.join(sorted(allowed))})")
+            raise ctx.fail(_join(path, key), f"unknown key{' ' + kind if kind else ''} "
+                                             f"(expected one of: {', '.join(sorted(allowed))})")
 
 
 def _table(ctx: _Ctx, path: str, value: Any) -> dict:
@@ -287,14 +290,25 @@ def _camera(ctx: _Ctx, t: dict) -> Camera:
     return cam
 
 
+def unit_vector(v) -> tuple[float, float, float]:
+    """v / |v| for any finite non-zero v: scaled by its largest component
+    first, so that neither tiny (1e-320) nor huge components underflow or
+    overflow the length."""
+    s = max(abs(float(c)) for c in v)
+    x, y, z = (float(c) / s for c in v)
+    n = math.hypot(x, y, z)
+    return (x / n, y / n, z / n)
+
+
 def validate_camera(cam: Camera, ctx: _Ctx | None = None) -> None:
     """position != target, and the view is not within 0.01 degrees of +-y."""
     ctx = ctx or _Ctx("camera")
-    f = [t - p for t, p in zip(cam.target, cam.position)]
-    n = math.hypot(*f)  # no overflow of the squares for large finite coordinates
-    if n == 0.0 or not math.isfinite(n):
+    if tuple(cam.target) == tuple(cam.position):
         raise ctx.fail("camera.target", "must differ from camera.position")
-    cos_up = abs(f[1]) / n
+    # scaled, so that the difference of far-apart points cannot overflow
+    s = max(abs(c) for c in (*cam.target, *cam.position))
+    f = unit_vector([t / s - p / s for t, p in zip(cam.target, cam.position)])
+    cos_up = abs(f[1])
     if cos_up > math.cos(math.radians(0.01)):
         raise ctx.fail("camera.target",
                        "the view direction is (within 0.01 degrees of) straight up or down; "
@@ -333,8 +347,16 @@ def _sky(ctx: _Ctx, t: dict, base_dir: Path | None) -> Sky:
             p = (base_dir or Path.cwd()) / p
         if p.suffix.lower() not in (".png", ".jpg", ".jpeg", ".pfm"):
             raise ctx.fail("sky.image", f"expected a .png, .jpg, .jpeg or .pfm picture, got {s.image!r}")
+        if p.is_dir():
+            raise ctx.fail("sky.image", f"{p} is a folder, not a picture")
         if not p.is_file():
             raise ctx.fail("sky.image", f"no such file: {p}")
+        from .imageio import ImageReadError, read_sky_image   # (imageio imports this module)
+
+        try:
+            read_sky_image(p)
+        except ImageReadError as e:
+            raise ctx.fail("sky.image", f"{p}: {e}") from None
         s.image_path = p
     return s
 
@@ -342,7 +364,8 @@ def _sky(ctx: _Ctx, t: dict, base_dir: Path | None) -> Sky:
 def _light(ctx: _Ctx, path: str, t: dict) -> Light:
     typ = _str(ctx, _join(path, "type"), t.get("type", "point"), ("point", "directional"))
     own = "position" if typ == "point" else "direction"
-    _check_keys(ctx, path, t, {"type", own, "color", "intensity"})
+    _check_keys(ctx, path, t, {"type", own, "color", "intensity"},
+                f'for a "{typ}" light' + ("" if "type" in t else " (the default type)"))
     light = Light(type=typ)
     if own not in t:
         raise ctx.fail(_join(path, own), f"required for a {typ} light")
@@ -412,7 +435,7 @@ def _object(ctx: _Ctx, path: str, t: dict, materials: dict[str, Material]) -> Sc
     if "type" not in t:
         raise ctx.fail(_join(path, "type"), "required (one of 'plane', 'sphere', 'box', 'cylinder')")
     typ = _str(ctx, _join(path, "type"), t["type"], tuple(_OBJECT_KEYS))
-    _check_keys(ctx, path, t, {"type", "material", "name"} | _OBJECT_KEYS[typ])
+    _check_keys(ctx, path, t, {"type", "material", "name"} | _OBJECT_KEYS[typ], f'for a "{typ}"')
     if "material" not in t:
         raise ctx.fail(_join(path, "material"), "required (a name from [materials])")
     mat = _str(ctx, _join(path, "material"), t["material"])
@@ -538,8 +561,14 @@ def resolve_scene_path(spec: str | os.PathLike | None) -> Path:
     return p
 
 
+def _count(items, noun: str) -> str:
+    return f"{len(items)} {noun}{'' if len(items) == 1 else 's'}"
+
+
 def load_scene(spec: str | os.PathLike | None = None) -> Scene:
     """Load and validate a scene file (or a built-in scene by name)."""
+    if spec is not None and not str(spec).strip():
+        raise SceneError(f"{str(spec)!r}: empty scene path (give a scene file or a built-in scene name)")
     path = resolve_scene_path(spec)
     source = str(spec) if spec is not None else f"<default scene> {path}"
     try:
