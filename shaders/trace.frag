@@ -137,6 +137,24 @@ Hits sweepShadow(vec3 o, vec3 d, float tmin, float tmax) {
     return h;
 }
 
+#ifdef HAS_DIELECTRIC
+// A sweep over the transparent objects only: a ray's passes after its
+// first.  The first pass of a ray (or shadow ray) sweeps every object and
+// so already knows the nearest opaque surface on the whole line; once the
+// ray has crossed a transparent surface it goes on along the same line,
+// where no opaque surface can come nearer, so only the transparent
+// surfaces need finding again.  (The first pass stays outside the loops
+// that call this: llvmpipe runs both sides of a branch, even on the loop
+// counter, so a `pass == 0 ? sweep : sweepMedia` would cost both.)
+Hits sweepMedia(vec3 o, vec3 d, float tmin, float tmax) {
+    Hits h = Hits(INF, INF, vec3(0.0), -1);
+#define SWEEP_MEDIUM(slot, k, shape) { vec3 n; float t = hitShape(k, shape, o, d, tmin, tmax, n); keepHit(k, slot, t, n, h); }
+    FOR_EACH_MEDIUM(SWEEP_MEDIUM)
+#undef SWEEP_MEDIUM
+    return h;
+}
+#endif
+
 // ---------------------------------------------------------------- media
 
 // The medium is the first transparent object (lowest slot, slots follow the
@@ -221,9 +239,14 @@ bool nextInteraction(vec3 o, vec3 d, inout uint mask, inout vec3 atten, out Inte
     it.p = o + h.tOpaque * d; it.n = h.nOpaque; it.object = h.kOpaque;
     return true;
 #else
+    // The first pass sweeps every object: the nearest opaque surface on the
+    // line from o0, at tOpaque0; later passes sweep the media only and take
+    // that surface at tOpaque0 - travelled from their own origin.
+    vec3 o0 = o;
+    float tmin = surfaceEps(o);
+    Hits h = sweep(o, d, tmin, INF);
+    float tOpaque0 = h.tOpaque, travelled = 0.0;
     for (int pass = 0; pass < 2 * NUM_OBJECTS + 2; ++pass) {
-        float tmin = surfaceEps(o);
-        Hits h = sweep(o, d, tmin, INF);
         vec3 a = absorptionOf(mediumOf(mask));
         if (h.tNear >= INF) {
             atten *= exp(-a * INF);     // escaping through an absorbing medium: nothing left
@@ -233,7 +256,7 @@ bool nextInteraction(vec3 o, vec3 d, inout uint mask, inout vec3 atten, out Inte
         float tGroup = h.tNear + surfaceEps(p);
         if (h.tOpaque <= tGroup) {
             atten *= exp(-a * h.tOpaque);
-            it.p = o + h.tOpaque * d; it.n = h.nOpaque; it.object = h.kOpaque;
+            it.p = o0 + tOpaque0 * d; it.n = h.nOpaque; it.object = h.kOpaque;
             return true;
         }
         atten *= exp(-a * h.tNear);
@@ -249,6 +272,12 @@ bool nextInteraction(vec3 o, vec3 d, inout uint mask, inout vec3 atten, out Inte
         }
         mask = c.after;
         o = p;
+        travelled += h.tNear;
+        tmin = surfaceEps(o);
+        Hits m = sweepMedia(o, d, tmin, INF);
+        m.tOpaque = tOpaque0 - travelled; m.nOpaque = h.nOpaque; m.kOpaque = h.kOpaque;
+        m.tNear = min(m.tNear, m.tOpaque);
+        h = m;
     }
     return false;   // pathological stack of coincident surfaces: treat as escaped
 #endif
@@ -267,10 +296,11 @@ vec3 shadowTransmittance(vec3 p, vec3 l, float dist, uint mask) {
     vec3 v = vec3(1.0);
     vec3 o = p;
     float left = dist;
+    // the first pass sees every opaque surface up to the light: any one
+    // blocks it; later passes sweep the media only
+    Hits h = sweepShadow(o, l, surfaceEps(o), left);
+    if (h.tOpaque < left) return vec3(0.0);
     for (int pass = 0; pass < 2 * NUM_OBJECTS + 2; ++pass) {
-        Hits h = sweepShadow(o, l, surfaceEps(o), left);
-        // any opaque surface before the light blocks it
-        if (h.tOpaque < left) return vec3(0.0);
         vec3 a = absorptionOf(mediumOf(mask));
         if (h.tNear >= left) return v * exp(-a * min(left, INF));
         vec3 q = o + h.tNear * l;
@@ -282,6 +312,7 @@ vec3 shadowTransmittance(vec3 p, vec3 l, float dist, uint mask) {
         if (maxComponent(v) <= 0.0) return vec3(0.0);
         o = q;
         left -= h.tNear;
+        h = sweepMedia(o, l, surfaceEps(o), left);
     }
     return v;
 #endif
