@@ -45,7 +45,7 @@ from pathlib import Path
 import numpy as np
 
 from .sampling import sample_offsets
-from .scene import Scene, SceneObject, unit_vector
+from .scene import Scene, SceneObject
 
 __all__ = [
     "render_reference", "camera_rays", "trace", "first_hit", "fresnel_dielectric", "refract",
@@ -717,7 +717,8 @@ class _Ctx:
                 with np.errstate(invalid="ignore", divide="ignore"):
                     l = to / dist[:, None]
             else:
-                l = np.broadcast_to(-np.array(unit_vector(lt.direction)), P.shape)
+                dvec = np.array(lt.direction, dtype=np.float64)
+                l = np.broadcast_to(-dvec / np.linalg.norm(dvec), P.shape)
                 dist = np.full(len(P), _INF)
             ndl = _dot(n_f, l)
             m = lit & (ndl > 0.0)
