@@ -1302,3 +1302,17 @@ def test_an_unknown_key_names_the_type_it_was_checked_for(tmp_path):
     with pytest.raises(SceneError, match=r'objects\[0\]\.height: unknown key for a "sphere"'):
         load_text(tmp_path, '[materials.m]\n[[objects]]\ntype = "sphere"\ncenter = [0, 0, 0]\nradius = 1\n'
                             'height = 2\nmaterial = "m"\n')
+
+
+def test_messages_quote_keys_name_dates_and_show_close_numbers_exactly(tmp_path):
+    # a material name with a dot is quoted in the key path, as TOML writes it
+    with pytest.raises(SceneError, match=r'materials\."a\.b"\.foo: unknown key'):
+        load_text(tmp_path, '[materials."a.b"]\nfoo = 1\n')
+    # TOML dates and times are named like the other types
+    for value, name in (("1979-05-27", "a date"), ("07:32:00", "a time"), ("1979-05-27T07:32:00", "a date-time")):
+        with pytest.raises(SceneError, match=f"camera.fov: expected a number, got {name}$"):
+            load_text(tmp_path, f"[camera]\nfov = {value}\n")
+    # min and max that differ past the 6th digit are printed so that they differ
+    with pytest.raises(SceneError, match=r"x: 1\.0000001 >= 1\.0\)"):
+        load_text(tmp_path, '[materials.m]\n[[objects]]\ntype = "box"\nmin = [1.0000001, 0, 0]\n'
+                            'max = [1.0, 1, 1]\nmaterial = "m"\n')

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 import tempfile
 import tomllib
 from dataclasses import dataclass, field, replace
@@ -187,9 +188,14 @@ class _Ctx:
         return SceneError(where + what)
 
 
+_BARE_KEY = re.compile(r"[A-Za-z0-9_-]+")
+
+
 def _join(path: str, key: str | int) -> str:
     if isinstance(key, int):
         return f"{path}[{key}]"
+    if not _BARE_KEY.fullmatch(key):
+        key = '"' + key.replace("\\", "\\\\").replace('"', '\\"') + '"'   # as TOML quotes it: materials."a.b"
     return f"{path}.{key}" if path else key
 
 
@@ -221,6 +227,14 @@ def _typename(v: Any) -> str:
         return "an array"
     if isinstance(v, dict):
         return "a table"
+    import datetime
+
+    if isinstance(v, datetime.datetime):     # (a datetime is a date too: first)
+        return "a date-time"
+    if isinstance(v, datetime.date):
+        return "a date"
+    if isinstance(v, datetime.time):
+        return "a time"
     return type(v).__name__
 
 
@@ -461,7 +475,7 @@ def _object(ctx: _Ctx, path: str, t: dict, materials: dict[str, Material]) -> Sc
         for i, axis in enumerate("xyz"):
             if not o.min[i] < o.max[i]:
                 raise ctx.fail(p("max"), f"each component of min must be < max ({axis}: "
-                                         f"{o.min[i]:g} >= {o.max[i]:g})")
+                                         f"{o.min[i]!r} >= {o.max[i]!r})")
         if "rotate" in t:
             o.rotate = _vec3(ctx, p("rotate"), t["rotate"])
     else:
@@ -473,8 +487,8 @@ def _object(ctx: _Ctx, path: str, t: dict, materials: dict[str, Material]) -> Sc
         if "wall" in t:
             w = _float(ctx, p("wall"), t["wall"], lo=0.0, lo_open=True)
             if not (w < o.radius and w < o.height):
-                raise ctx.fail(p("wall"), f"expected 0 < wall < radius and wall < height, got {w:g} "
-                                          f"(radius {o.radius:g}, height {o.height:g})")
+                raise ctx.fail(p("wall"), f"expected 0 < wall < radius and wall < height, got {w!r} "
+                                          f"(radius {o.radius!r}, height {o.height!r})")
             o.wall = w
     # finite extents: a box or cylinder whose size overflows is not a solid we can trace
     return o
@@ -501,7 +515,7 @@ def scene_from_dict(data: dict, source: str = "<scene>", base_dir: Path | None =
     if "materials" in data:
         mats = _table(ctx, "materials", data["materials"])
         for mname, mt in mats.items():
-            mpath = f"materials.{mname}"
+            mpath = _join("materials", mname)
             scene.materials[mname] = _material(ctx, mpath, _table(ctx, mpath, mt))
     if "lights" in data:
         lights = data["lights"]
