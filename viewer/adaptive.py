@@ -828,19 +828,23 @@ class AdaptiveRender:
     def spp(self) -> np.ndarray:
         return np.rint(self.total[..., 3]).astype(np.int32)
 
+    def _ask_round(self, method: str):
+        """The sampler's answer about the round in flight (its `method`,
+        None outside add_samples), with the round's (pixels, sums before
+        it); None between rounds or when the sampler has no such method."""
+        ask = getattr(self.sampler, method, None)
+        if self._upgrading is None or ask is None:
+            return None
+        got = ask()
+        return None if got is None else (got, *self._upgrading)
+
     def in_flight(self) -> tuple[np.ndarray, np.ndarray] | None:
         """While a round's draws run (between steps): (flat pixel indices,
         their sums (n, 4) = sum (L, 1) with what the round's draws so far
         traced); None between rounds.  `total` gets them when the round
         ends; a sampler without sums_so_far shows none before that."""
-        so_far = getattr(self.sampler, "sums_so_far", None)
-        if self._upgrading is None or so_far is None:
-            return None
-        got = so_far()
-        if got is None:
-            return None
-        flat, old = self._upgrading
-        return flat, old + got
+        got = self._ask_round("sums_so_far")
+        return None if got is None else (got[1], got[2] + got[0])
 
     def round_target(self):
         """While a round's draws run: (its flat pixel indices, the texture
@@ -848,13 +852,8 @@ class AdaptiveRender:
         AdaptiveSampler.sums_target -- for a display that adds them to
         `total` on the GPU; None between rounds or with a sampler that has
         no such texture."""
-        target = getattr(self.sampler, "sums_target", None)
-        if self._upgrading is None or target is None:
-            return None
-        got = target()
-        if got is None:
-            return None
-        return (self._upgrading[0],) + got
+        got = self._ask_round("sums_target")
+        return None if got is None else (got[1], *got[0])
 
     def image(self) -> np.ndarray:
         """(H, W, 3) float32: the mean of each pixel's samples so far (a
