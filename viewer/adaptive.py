@@ -73,6 +73,7 @@ from typing import Callable, NamedTuple
 import moderngl
 import numpy as np
 
+from . import interrupt
 from .gpu_scene import camera_uniforms
 from .renderer import intersect_rect
 from .sampling import progressive_offsets
@@ -807,6 +808,7 @@ class AdaptiveRender:
         """Run one draw call (and the bookkeeping after it); True when done."""
         if self.done:
             return True
+        interrupt.check()                 # a deferred Ctrl-C ends the render between draws
         self.steps_done += 1
         try:
             next(self._gen)

@@ -40,6 +40,7 @@ import glfw  # noqa: E402
 import moderngl  # noqa: E402
 import numpy as np  # noqa: E402
 
+from . import interrupt
 from .controls import HELP_ALL, VIEWS, Controls, merge_reloaded  # noqa: E402
 from .progressive import Progressive  # noqa: E402
 from .renderer import Renderer  # noqa: E402
@@ -360,6 +361,7 @@ class Viewer:
         warm = max(50, self.soak // 5)
         while not glfw.window_should_close(self.window):
             self._wait()
+            interrupt.check()         # Ctrl-C in the terminal (deferred: viewer/interrupt.py)
             if self.soak:
                 self._soak_step()
                 if self.frames == warm:

@@ -442,8 +442,13 @@ def main(argv: list[str] | None = None) -> int:
     from .scene import SceneError
     from .shaders import ShaderError
 
+    from . import interrupt
+
     try:
-        return COMMANDS[args.command](args)
+        # Ctrl-C is taken between draw calls only (viewer/interrupt.py: one
+        # arriving inside a shader compile crashed llvmpipe)
+        with interrupt.deferred():
+            return COMMANDS[args.command](args)
     except (SceneError, UsageError) as e:
         print(f"glassray: {e}", file=sys.stderr)
         return 2

@@ -16,6 +16,7 @@ import moderngl
 import numpy as np
 
 from .gpu_scene import camera_uniforms, pack_scene
+from . import interrupt
 from .imageio import read_sky_image
 from .sampling import sample_offsets
 from .scene import Scene
@@ -307,6 +308,7 @@ class Renderer:
                     # tile, so Ctrl-C (checked between draws) stops at once and
                     # the progress bar is truthful.
                     ctx.finish()
+                    interrupt.check()
                     done += 1
                     if progress is not None:
                         progress(done, total)
