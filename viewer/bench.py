@@ -326,6 +326,7 @@ def reference_image(scene, stem: str, width: int, height: int, samples: int, cac
             pass
     t0 = time.perf_counter()
     if kind == "float64":
+        from . import interrupt
         from .reference import camera_rays, trace
         from .sampling import sample_offsets
 
@@ -333,6 +334,7 @@ def reference_image(scene, stem: str, width: int, height: int, samples: int, cac
         offsets = sample_offsets(samples, REFERENCE_SEED)
         last = t0
         for k, off in enumerate(offsets):
+            interrupt.check()                         # Ctrl-C between samples (viewer/interrupt.py)
             o, d = camera_rays(ref_scene, width, height, off)
             acc += trace(ref_scene, o.reshape(-1, 3), d.reshape(-1, 3))
             now = time.perf_counter()

@@ -498,6 +498,9 @@ class MitsubaPeer:
         returns when the render is finished (the array is evaluated)."""
         import mitsuba as mi
 
+        from . import interrupt
+
+        interrupt.check()                             # Ctrl-C between renders (viewer/interrupt.py)
         img = mi.render(self.mi_scene, spp=int(spp), seed=int(seed))
         a = np.array(img, dtype=np.float64)          # forces the JIT to run the kernel
         return a[..., :3] * self.scene.render.exposure

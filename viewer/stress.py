@@ -966,7 +966,10 @@ def run(args) -> int:
     try:
         suite = Suite(ctx, naive=args.naive)
         results = []
+        from . import interrupt
+
         for name in names:
+            interrupt.check()                         # Ctrl-C between cases (viewer/interrupt.py)
             results.append(suite.run_case(get_case(name), args.size))
             print(f"stress: {name}: {'ok' if results[-1].ok else 'FAIL'}", file=sys.stderr, flush=True)
         variant = "textbook intersections (NAIVE_INTERSECT)" if args.naive else "robust intersections"
