@@ -190,7 +190,10 @@ def test_the_progress_bar_waits_for_a_long_render_and_is_erased(monkeypatch):
         out = err.getvalue()
         # a short render draws nothing; a long one ends on an erased line,
         # so that what follows (the --timing line) is the only text left
-        assert out == "" if not long else out.endswith("\r") and out.rsplit("\r", 2)[1].strip() == ""
+        if long:
+            assert out.endswith("\r") and out.rsplit("\r", 2)[1].strip() == ""
+        else:
+            assert out == ""
 
 
 def test_a_tiny_directional_light_direction_lights_as_any_other_length(tmp_path):

@@ -187,6 +187,14 @@ def run_adaptive(p: Progressive, budget_ms: float = 1e-3, limit: int = 10000) ->
     return means
 
 
+def sized(setup, w: int, h: int, samples: int) -> None:
+    """The adaptive_setup's scene at `samples` and its Progressive at w x h."""
+    _, scene, r, p = setup
+    scene.render.samples = samples
+    r.set_scene(scene)
+    p.resize(w, h)
+
+
 @pytest.fixture
 def adaptive_setup(gl):
     scene = make_scene(DOC, "adaptive")
@@ -202,9 +210,7 @@ def test_adaptive_accumulation_equals_the_offscreen_adaptive_render(adaptive_set
 
     gl, scene, r, p = adaptive_setup
     w, h = 61, 37
-    scene.render.samples = 6
-    r.set_scene(scene)
-    p.resize(w, h)
+    sized(adaptive_setup, w, h, 6)
     assert p.adaptive and not p.done and p.mean_spp == 0.0
     means = run_adaptive(p)
     job = p.job
@@ -239,9 +245,7 @@ def test_a_round_in_flight_is_shown_as_it_goes(adaptive_setup):
     # and the HUD's mean is the mean of the pixels' counts.
     gl, scene, r, p = adaptive_setup
     w, h = 40, 24
-    scene.render.samples = 16
-    r.set_scene(scene)
-    p.resize(w, h)
+    sized(adaptive_setup, w, h, 16)
     shown_in_rounds, states = 0, []
     while not p.done:
         p.accumulate(budget_ms=1e-3)
@@ -321,11 +325,10 @@ def _gl_counts(gl) -> dict[str, int]:
 def test_a_restart_releases_the_adaptive_render_and_starts_over(adaptive_setup):
     from viewer.adaptive import render_adaptive
 
+    # rounds enough to stop in
     gl, scene, r, p = adaptive_setup
     w, h = 40, 24
-    scene.render.samples = 16  # rounds enough to stop in
-    r.set_scene(scene)
-    p.resize(w, h)
+    sized(adaptive_setup, w, h, 16)
     run_adaptive(p)  # compiles the adaptive shader variants (kept by the renderer)
     p.restart()
     base = _gl_counts(gl)
@@ -360,9 +363,7 @@ def test_a_restart_releases_the_adaptive_render_and_starts_over(adaptive_setup):
 def test_adaptive_screenshot_and_switching_modes(adaptive_setup):
     gl, scene, r, p = adaptive_setup
     w, h = 40, 24
-    scene.render.samples = 16
-    r.set_scene(scene)
-    p.resize(w, h)
+    sized(adaptive_setup, w, h, 16)
     # P before anything is traced: the first sample of every pixel (the centre)
     p.finish_pass()
     assert p.has_full_sample and p.mean_spp == 1.0 and not p.done

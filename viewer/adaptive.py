@@ -680,8 +680,9 @@ class AdaptiveSampler:
     def sums_so_far(self) -> np.ndarray | None:
         """Between the yields of add_samples: total (n, 4) = sum (L, 1) of
         the samples its draws have traced so far, in the order of its
-        pixels (0 where none yet); None outside add_samples.  (The viewer
-        shows a pass's pixels as they improve, not only when it ends.)"""
+        pixels (0 where none yet); None outside add_samples.  (Read back:
+        AdaptiveRender.image mid-round, the viewer's screenshot; the window
+        reads sums_target on the GPU instead.)"""
         if self._in_flight is None:
             return None
         fbo, slot = self._in_flight
@@ -846,7 +847,10 @@ class AdaptiveRender:
         traced); None between rounds.  `total` gets them when the round
         ends; a sampler without sums_so_far shows none before that."""
         got = self._ask_round("sums_so_far")
-        return None if got is None else (got[1], got[2] + got[0])
+        if got is None:
+            return None
+        so_far, flat, old = got
+        return flat, old + so_far
 
     def round_target(self):
         """While a round's draws run: (its flat pixel indices, the texture
@@ -855,7 +859,10 @@ class AdaptiveRender:
         `total` on the GPU; None between rounds or with a sampler that has
         no such texture."""
         got = self._ask_round("sums_target")
-        return None if got is None else (got[1], *got[0])
+        if got is None:
+            return None
+        (sums_tex, slot), flat, _ = got
+        return flat, sums_tex, slot
 
     def image(self) -> np.ndarray:
         """(H, W, 3) float32: the mean of each pixel's samples so far (a
@@ -999,7 +1006,8 @@ class AdaptiveRender:
             except StopIteration as stop:
                 return stop.value
             self.draws_done += 1
-            self.round_traced += getattr(self.sampler, "last_draw_fragments", 0)
+            if self._upgrading is not None:             # a round's draw (not the first or corner pass)
+                self.round_traced += getattr(self.sampler, "last_draw_fragments", 0)
             yield
 
 

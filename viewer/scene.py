@@ -10,6 +10,7 @@ one line on stderr and exit status 2.
 
 from __future__ import annotations
 
+import datetime
 import math
 import os
 import re
@@ -227,8 +228,6 @@ def _typename(v: Any) -> str:
         return "an array"
     if isinstance(v, dict):
         return "a table"
-    import datetime
-
     if isinstance(v, datetime.datetime):     # (a datetime is a date too: first)
         return "a date-time"
     if isinstance(v, datetime.date):
