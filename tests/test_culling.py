@@ -154,3 +154,97 @@ def test_segment_distance():
     p = np.array([[1.0, 1, 0], [-1.0, 0, 0], [3.0, 0, 1]])
     np.testing.assert_allclose(culling._segment_distance(p, a, b, None), [1, 1, math.sqrt(2)])
     np.testing.assert_allclose(culling._segment_distance(p, a, None, np.array([1.0, 0, 0])), [1, 1, 1])
+
+
+def _surface_points(obj, rng, n=20000):
+    """Points spread over the object's surface (world frame), for checking
+    its support function from outside the code under test."""
+    from viewer.gpu_scene import AXES, rotation_world_from_local
+    if obj.type == "sphere":
+        v = rng.normal(size=(n, 3))
+        return np.array(obj.center) + obj.radius * v / np.linalg.norm(v, axis=1, keepdims=True)
+    if obj.type == "box":
+        lo, hi = np.array(obj.min), np.array(obj.max)
+        q = rng.uniform(-1, 1, size=(n, 3))
+        q[np.arange(n), rng.integers(0, 3, n)] = rng.choice([-1.0, 1.0], n)   # onto a face
+        q[: 8] = [[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]
+        return (lo + hi) / 2 + (q * (hi - lo) / 2) @ rotation_world_from_local(obj.rotate).T
+    ax = AXES[obj.axis]
+    others = [i for i in range(3) if i != ax]
+    phi = rng.uniform(0, 2 * math.pi, n)
+    p = np.zeros((n, 3))
+    p[:, others[0]] = obj.radius * np.cos(phi)
+    p[:, others[1]] = obj.radius * np.sin(phi)
+    p[:, ax] = rng.choice([0.0, obj.height], n)             # the rims of the two end discs
+    return np.array(obj.base) + p
+
+
+@pytest.mark.parametrize("obj", [
+    {"type": "sphere", "center": [0.3, 1.0, -2.0], "radius": 0.7},
+    {"type": "box", "min": [-0.05, 0.0, -0.05], "max": [0.05, 2.5, 0.05], "rotate": [0, 10, -25]},
+    {"type": "box", "min": [1, 2, 3], "max": [2, 2.5, 5]},
+    {"type": "cylinder", "base": [0, 0, 0], "radius": 1.0, "height": 2.4, "wall": 0.06},
+    {"type": "cylinder", "base": [1, 0.5, -1], "radius": 0.3, "height": 3.0, "axis": "x"},
+])
+def test_support_function_is_the_exact_extent_of_each_shape(obj):
+    scene = scene_from_dict({"materials": {"m": {}}, "objects": [{**obj, "material": "m"}]}, "s.toml")
+    o = scene.objects[0]
+    rng = np.random.default_rng(7)
+    dirs = rng.normal(size=(64, 3))
+    got = culling.support(o, dirs)
+    sampled = (_surface_points(o, rng) @ dirs.T).max(axis=0)
+    assert np.all(got >= sampled - 1e-9)                    # conservative: no point beyond it
+    # and exact: the sampled surface comes within a sampling step of it
+    assert np.all(got - sampled <= 0.02 * np.linalg.norm(dirs, axis=1))
+
+
+@pytest.mark.parametrize("light", [{"type": "point", "position": [4.0, 6.0, 3.0]},
+                                   {"type": "point", "position": [-1.0, 3.0, 0.5]},
+                                   {"type": "directional", "direction": [-0.4, -1.0, 0.2]}])
+def test_shadow_disc_holds_every_shadowed_floor_point(light):
+    """Floor points whose way to the light passes through the sphere, found
+    by shooting from the light through random points of the sphere (or
+    along the light through them), all lie in the disc, and the disc is not
+    much larger than what they cover."""
+    scene = scene_from_dict({"lights": [light], "objects": []}, "l.toml")
+    lt = scene.lights[0]
+    rng = np.random.default_rng(11)
+    for _ in range(20):
+        c = rng.uniform([-2, 0.3, -2], [2, 2.0, 2])
+        r = float(rng.uniform(0.1, 0.6))
+        disc = culling.shadow_disc(c, r, lt, 0.0, eye_y=2.0)
+        if disc is None:
+            continue
+        v = rng.normal(size=(4000, 3))
+        q = c + r * rng.uniform(0, 1, (4000, 1)) ** (1 / 3) * v / np.linalg.norm(v, axis=1, keepdims=True)
+        if lt.type == "directional":
+            d = np.array(lt.direction) / np.linalg.norm(lt.direction)
+            p = q + (-q[:, 1] / d[1])[:, None] * d
+        else:
+            L = np.array(lt.position)
+            d = q - L
+            keep = d[:, 1] < 0
+            p = L + (-L[1] / d[keep, 1])[:, None] * d[keep]
+        dist = np.linalg.norm(p - disc[0], axis=1)
+        assert dist.max() <= disc[1] * (1 + 1e-9)
+        assert disc[1] <= 1.6 * dist.max()
+
+
+def test_a_light_below_the_top_of_an_object_keeps_it_at_the_horizon():
+    """A low point light throws an unbounded shadow: no disc."""
+    scene = scene_from_dict({"lights": [{"position": [3.0, 1.0, 0.0]}], "objects": []}, "l.toml")
+    assert culling.shadow_disc(np.array([0.0, 1.0, 0.0]), 0.5, scene.lights[0], 0.0, eye_y=2.0) is None
+    assert culling.shadow_disc(np.array([0.0, 1.0, 0.0]), 0.5, scene.lights[0], 0.0, eye_y=-2.0) is None
+
+
+def test_horizon_tiles_keep_only_what_can_shadow_them():
+    """In the default scene the tiles along the horizon away from the glass
+    see only the floor, and the glass's shadow falls near it: they are drawn
+    with the floor alone (before, a tile reaching the horizon got every
+    object)."""
+    scene = load_scene("default")
+    labels, subsets = culling.tile_subsets(scene, 1280, 720)
+    floor_only = subsets.index((0,))
+    # tile rows 4..6 (image rows 128..224: the horizon, 130, among them),
+    # columns 32.. (x >= 1024: far right of the glass and its shadow)
+    assert np.all(labels[4:7, 32:] == floor_only)

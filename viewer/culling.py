@@ -9,22 +9,28 @@ compiled without the objects that a tile cannot see, nor shadow, is exact
 there and costs what its own objects cost.  (On a GPU the same holds in
 part: fewer registers, more threads in flight.)
 
-The tests are conservative, in float64 on bounding spheres padded by
-PAD_REL of the scene's size:
+The tests are conservative, in float64 on bounds padded by PAD_REL of the
+scene's size:
 
 * camera rays: a bounded object can be met by a ray of the tile only when
-  its bounding sphere reaches into the tile's pyramid of rays (the four
-  side planes through the eye); a plane y = h when some ray of the pyramid
-  points toward it;
+  its bounding sphere and the object itself (its exact support function:
+  sphere, rotated box, cylinder) reach past each of the tile's four side
+  planes through the eye; a plane y = h when some ray of the pyramid points
+  toward it;
 * secondary rays: when an object the tile may see is reflective or
   transparent, rays go anywhere: the tile gets every object;
 * shadow rays: start on what the camera rays may meet and go to each light
-  (with a non-zero colour): within the bounding sphere of a seen object or
-  of the tile's footprint on a plane (the quad of its corner rays; a tile
-  that reaches the horizon gets every object), so they stay inside the
-  capsule from that sphere to the light (for a directional light, the
-  half-infinite one against its direction); an object whose bounding sphere
-  meets a capsule may shadow the tile.
+  (with a non-zero colour).  From a seen object they stay inside the
+  capsule from its bounding sphere to the light (for a directional light,
+  the half-infinite one against its direction); an object whose bounding
+  sphere meets that capsule may shadow the tile.  From a plane they start
+  in the tile's footprint on it, and an object shadows only the points of
+  the plane in its shadow region: a bounded ellipse when the light is above
+  the object (shadow_disc bounds it by a disc), which the tile's pyramid
+  must reach, and the capsule of the footprint's bounding sphere must meet
+  the object too when the footprint is bounded.  So a tile that reaches
+  the horizon (an unbounded footprint) keeps only the objects whose shadows
+  it can see.
 
 An object whose solid holds the eye is always kept (it is the medium every
 camera ray starts in).  Subsets are merged so that at most MAX_VARIANTS
@@ -34,11 +40,12 @@ subset grows least, up to the whole scene.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from .gpu_scene import bounding_sphere, camera_uniforms, contains_point, scene_scale
+from .gpu_scene import AXES, bounding_sphere, camera_uniforms, contains_point, rotation_world_from_local, scene_scale
 from .scene import Scene, unit_vector
 
 #: Tile side in pixels.
@@ -76,12 +83,96 @@ def _segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray | None, direct
     return np.linalg.norm(p - (a + t[..., None] * ab), axis=-1)
 
 
+def _capsule_meets(centres: np.ndarray, radii: np.ndarray, c: np.ndarray, rad, light) -> np.ndarray:
+    """Which spheres (centres (n, 3), radii (n,)) meet the capsule swept by a
+    sphere (c (..., 3), rad (...)) toward `light` (to its position, or
+    half-infinite against a directional light's direction): (..., n)."""
+    c = np.asarray(c, dtype=np.float64)[..., None, :]                  # (..., 1, 3)
+    rad = np.asarray(rad, dtype=np.float64)[..., None]
+    if light.type == "directional":
+        ab = -np.array(unit_vector(light.direction), dtype=np.float64)
+        t = np.maximum(np.sum((centres - c) * ab, axis=-1) / np.dot(ab, ab), 0.0)
+    else:
+        ab = np.array(light.position, dtype=np.float64) - c
+        denom = np.maximum(np.sum(ab * ab, axis=-1), 1e-300)
+        t = np.clip(np.sum((centres - c) * ab, axis=-1) / denom, 0.0, 1.0)
+    dist = np.linalg.norm(centres - (c + t[..., None] * ab), axis=-1)
+    return dist < radii + rad
+
+
+def support(obj, n: np.ndarray) -> np.ndarray:
+    """max over the object's points p of n . p, for directions n (..., 3)
+    (+inf for a plane): the exact support function of a sphere, a (rotated)
+    box and a cylinder (the hull of its two end discs: n . c + r |n x a| at
+    each end; a wall changes nothing outside).  An object lies outside the
+    half-space n . p >= d exactly when support(n) < d: a tile's pyramid
+    cannot meet it when that holds for one of its side planes."""
+    n = np.asarray(n, dtype=np.float64)
+    if obj.type == "plane":
+        return np.full(n.shape[:-1], np.inf)
+    if obj.type == "sphere":
+        return n @ np.array(obj.center, float) + obj.radius * np.linalg.norm(n, axis=-1)
+    if obj.type == "box":
+        lo, hi = np.array(obj.min, float), np.array(obj.max, float)
+        rot = rotation_world_from_local(obj.rotate)        # columns: the box's axes
+        return n @ ((lo + hi) / 2) + np.abs(n @ rot) @ ((hi - lo) / 2)
+    axis = np.zeros(3)
+    axis[AXES[obj.axis]] = 1.0
+    base = np.array(obj.base, float)
+    across = obj.radius * np.linalg.norm(np.cross(n, axis), axis=-1)
+    return np.maximum(n @ base, n @ (base + obj.height * axis)) + across
+
+
+def shadow_disc(centre: np.ndarray, radius: float, light, height: float, eye_y: float):
+    """A disc on the plane y = height holding every point of it whose shadow
+    ray toward `light` can meet the sphere (centre, radius): (disc centre
+    (3,), disc radius), or None when that region is unbounded (or the light
+    is not on the eye's side of the plane, where the plane is lit from
+    behind and the question does not arise in the same form).
+
+    Directional light (unit vector u toward it): the sphere projected along u
+    onto the plane, an ellipse of semi-axes radius and radius / u_y around
+    the centre's projection.  Point light at L, outside the sphere: the cone
+    of rays from L that meet the sphere, angle a = asin(radius / |c - L|),
+    its axis at angle t from straight down; the plane cuts it in an ellipse
+    when t + a < 90 degrees (the gnomonic image of a circle on the sphere of
+    directions): along the axis's azimuth it spans H tan(t - a) .. H tan(t + a)
+    from the foot of L (H = L_y - height), across it the semi-axis is
+    H sin a / sqrt(cos^2 t - sin^2 a)."""
+    above = eye_y > height
+    if light.type == "directional":
+        u = -np.array(unit_vector(light.direction), dtype=np.float64)
+        uy = u[1] if above else -u[1]
+        if uy <= 1e-6:
+            return None
+        proj = centre - ((centre[1] - height) / u[1]) * u
+        return proj, radius / uy
+    L = np.array(light.position, dtype=np.float64)
+    H = (L[1] - height) if above else (height - L[1])
+    to_c = centre - L
+    dist = float(np.linalg.norm(to_c))
+    if H <= 0 or dist <= radius:
+        return None
+    a = math.asin(radius / dist)
+    down = (-to_c[1] if above else to_c[1]) / dist
+    t = math.acos(min(1.0, max(-1.0, down)))
+    margin = math.radians(1e-3)
+    if t + a >= math.pi / 2 - margin:
+        return None
+    near, far = H * math.tan(t - a), H * math.tan(t + a)
+    minor = H * math.sin(a) / math.sqrt(math.cos(t) ** 2 - math.sin(a) ** 2)
+    horiz = np.array([to_c[0], 0.0, to_c[2]])
+    hn = float(np.linalg.norm(horiz))
+    azimuth = horiz / hn if hn > 0 else np.array([1.0, 0.0, 0.0])
+    foot = np.array([L[0], height, L[2]])
+    return foot + azimuth * (near + far) / 2, max((far - near) / 2, minor)
+
+
 def tile_subsets(scene: Scene, width: int, height: int, tile: int = TILE) -> tuple[np.ndarray, list[tuple[int, ...]]]:
     """(labels (tiles_y, tiles_x) int, top row first; subsets): the object
     indices each tile needs, as an index into ``subsets``."""
     objs = scene.objects
     n = len(objs)
-    everything = tuple(range(n))
     tx, ty = -(-width // tile), -(-height // tile)
     if n == 0:
         return np.zeros((ty, tx), np.int32), [()]
@@ -118,55 +209,78 @@ def tile_subsets(scene: Scene, width: int, height: int, tile: int = TILE) -> tup
     normals = np.where(flip[..., None], -normals, normals)
     normals = _unit(normals)
 
-    labels = np.zeros((ty, tx), np.int32)
-    subsets: list[tuple[int, ...]] = []
-    index: dict[tuple[int, ...], int] = {}
     rel = centres - eye                              # (n, 3)
     # signed distances of every sphere centre to every side plane: (ty, tx, 4, n)
     side = np.einsum("yxcd,nd->yxcn", normals, rel)
     in_pyramid = np.all(side > -radii[None, None, None, :], axis=2) & (radii > 0)   # (ty, tx, n)
-    for j in range(ty):
-        for i in range(tx):
-            seen = set(np.flatnonzero(in_pyramid[j, i]).tolist())
-            footprints = []                          # (centre, radius) of plane footprints
-            unbounded = False
-            for k in planes:
-                h = objs[k].height
-                dy = quad[j, i, :, 1]
-                toward = dy < 0 if eye[1] > h else (dy > 0 if eye[1] < h else np.ones(4, bool))
-                if not toward.any():
-                    continue
-                seen.add(k)
-                if eye[1] == h or not toward.all():
-                    unbounded = True
-                    continue
-                t = (h - eye[1]) / dy
-                pts = eye + t[:, None] * quad[j, i]
-                c = pts.mean(axis=0)
-                footprints.append((c, float(np.max(np.linalg.norm(pts - c, axis=1))) + pad))
-            seen.update(holds_eye)
-            if unbounded or any(scatters[k] for k in seen):
-                key = everything
-            else:
-                need = set(seen)
-                if lights:
-                    regions = footprints + [(centres[k], radii[k]) for k in seen if radii[k] > 0]
-                    bounded = radii > 0
-                    for c, rad in regions:
-                        for lt in lights:
-                            if lt.type == "directional":
-                                dist = _segment_distance(centres, c, None, -np.array(unit_vector(lt.direction)))
-                            else:
-                                dist = _segment_distance(centres, c, np.array(lt.position, float), None)
-                            hit = bounded & (dist < radii + rad)
-                            need.update(np.flatnonzero(hit).tolist())
-                    # planes are unbounded: any of them may cut a shadow ray
-                    need.update(planes)
-                key = tuple(sorted(need))
-            if key not in index:
-                index[key] = len(subsets)
-                subsets.append(key)
-            labels[j, i] = index[key]
+    # ... and the object itself reaches into it: its support along every
+    # side normal passes the plane (exact per plane; the sphere test stays
+    # as the cheap first cut)
+    offset = normals @ eye                                              # (ty, tx, 4)
+    for k, o in enumerate(objs):
+        if o.type != "plane":
+            in_pyramid[:, :, k] &= np.all(support(o, normals) - offset > -pad, axis=2)
+
+    # Per plane and light, which tiles' pyramids reach each bounded object's
+    # shadow disc on the plane (True also where the shadow is unbounded):
+    # (ty, tx, n) masks; the discs do not depend on the tile.
+    disc_reach = {}
+    for k in planes:
+        for li, lt in enumerate(lights):
+            reach = np.zeros((ty, tx, n), bool)
+            for m in np.flatnonzero(radii > 0):
+                disc = shadow_disc(centres[m], radii[m], lt, objs[k].height, eye[1])
+                if disc is None:
+                    reach[:, :, m] = True
+                else:
+                    reach[:, :, m] = np.all(normals @ (disc[0] - eye) > -(disc[1] + pad), axis=2)
+            disc_reach[k, li] = reach
+
+    # What each tile needs, as (ty, tx, n) masks.
+    bounded = radii > 0
+    seen = in_pyramid.copy()
+    seen[:, :, holds_eye] = True
+    unbounded = np.zeros((ty, tx), bool)
+    shadows = np.zeros((ty, tx, n), bool)        # may shadow what the tile sees
+    for k in planes:
+        h = objs[k].height
+        dy = quad[..., 1]                                             # (ty, tx, 4)
+        toward = dy < 0 if eye[1] > h else (dy > 0 if eye[1] < h else np.ones_like(dy, bool))
+        hits = toward.any(axis=2)
+        seen[:, :, k] |= hits
+        if eye[1] == h:
+            unbounded |= hits
+            continue
+        # the footprint's bounding sphere where all four corner rays meet the
+        # plane; elsewhere (the tile reaches the horizon) it is unbounded
+        closed = toward.all(axis=2)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = np.where(toward, (h - eye[1]) / np.where(toward, dy, 1.0), 0.0)
+        pts = eye + t[..., None] * quad                               # (ty, tx, 4, 3)
+        c = pts.mean(axis=2)
+        rad = np.linalg.norm(pts - c[:, :, None, :], axis=3).max(axis=2) + pad
+        for li, lt in enumerate(lights):
+            # an object shadows a point of the plane only inside its shadow
+            # region, which the tile's rays must reach; from a bounded
+            # footprint, its capsule toward the light must meet the object too
+            from_footprint = disc_reach[k, li] & (~closed[..., None] | _capsule_meets(centres, radii, c, rad, lt))
+            shadows |= hits[..., None] & bounded & from_footprint
+    for lt in lights:
+        # from a seen object: what the capsule of its sphere toward the light meets
+        between = _capsule_meets(centres, radii, centres, radii, lt) & bounded & bounded[:, None]   # (n, n)
+        shadows |= (seen.astype(np.int32) @ between.astype(np.int32)) > 0
+    need = seen | shadows
+    if lights:
+        need[:, :, planes] |= True           # planes are unbounded: any of them may cut a shadow ray
+    need[unbounded | np.any(seen & scatters, axis=2)] = True
+    # one subset per distinct mask, numbered in raster order of first use
+    flat = need.reshape(-1, n)
+    keys, first, inverse = np.unique(flat, axis=0, return_index=True, return_inverse=True)
+    order = np.argsort(first)
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    labels = rank[inverse.ravel()].reshape(ty, tx).astype(np.int32)
+    subsets = [tuple(np.flatnonzero(keys[g]).tolist()) for g in order]
     return labels, subsets
 
 
