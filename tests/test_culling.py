@@ -248,3 +248,50 @@ def test_horizon_tiles_keep_only_what_can_shadow_them():
     # tile rows 4..6 (image rows 128..224: the horizon, 130, among them),
     # columns 32.. (x >= 1024: far right of the glass and its shadow)
     assert np.all(labels[4:7, 32:] == floor_only)
+
+
+def test_draws_that_may_not_compile_use_ready_variants_or_the_full_shader(gl):
+    """compile=False (the viewer's previews) compiles no culling variant and
+    still draws the exact image: with nothing ready, the full shader; after
+    another camera's variants were compiled, those of them that hold a
+    group's objects; after a change of scene, never a variant whose object
+    list no longer matches."""
+    import moderngl
+    scene = copy.deepcopy(load_scene("bench-opaque"))
+    w, h = 96, 54
+    full = Renderer(gl, scene)
+    full.cull = False
+    r = Renderer(gl, scene)
+
+    def draw(renderer, compile):
+        fbo = renderer._target(w, h)
+        fbo.use()
+        gl.disable(moderngl.BLEND)
+        renderer.draw_sample(w, h, (0.5, 0.5), compile=compile)
+        return renderer._read_rgb(fbo)
+
+    try:
+        assert np.array_equal(draw(r, False), draw(full, True))
+        assert not r._subset_programs                            # nothing compiled
+        r.COMPILES_PER_DRAW = 99
+        draw(r, True)                                            # this camera's variants
+        ready = len(r._subset_programs)
+        assert ready > 0
+        scene.camera.position = tuple(np.array(scene.camera.position) + [0.8, 0.3, -0.5])
+        full.set_scene(scene)
+        r.set_scene(scene)
+        progs = r._culled(w, h, compile=False)
+        assert len(r._subset_programs) == ready                  # still nothing new compiled
+        assert any(p is not r._main for p, _ in progs)           # some group reuses a variant
+        assert np.array_equal(draw(r, False), draw(full, True))
+        # another scene whose object 1 is of another kind: the old variants
+        # list object 1 as what it was, so none may stand in for its groups
+        other = copy.deepcopy(scene)
+        other.objects[1], other.objects[4] = other.objects[4], other.objects[1]
+        assert other.objects[1].type != scene.objects[1].type
+        full.set_scene(other)
+        r.set_scene(other)
+        assert np.array_equal(draw(r, False), draw(full, True))
+    finally:
+        r.release()
+        full.release()

@@ -373,6 +373,7 @@ class Viewer:
                     self.prog.restart()
                     self.prog.compile_adaptive()
                     gl_start, rss_start = gl_object_counts(self.ctx, self.prog), _rss_kb()
+                    variants_start = len(self.renderer._subset_programs)
                 if self.frames >= self.soak:
                     break
             self._frame()
@@ -380,9 +381,11 @@ class Viewer:
             self.prog.restart()
             self.ctx.finish()
             gl_end, rss_end = gl_object_counts(self.ctx, self.prog), _rss_kb()
+            variants_end = len(self.renderer._subset_programs)
             moving = sorted(self._preview_frames) or [0.0]
             print(f"soak: frames={self.frames} warmup={warm} rss_kb={rss_start}->{rss_end} "
                   f"gl_objects={sum(gl_start.values())}->{sum(gl_end.values())} "
+                  f"culling_variants={variants_start}->{variants_end}/{self.renderer.SUBSET_PROGRAMS} "
                   f"moving_frame_ms_median={moving[len(moving) // 2]:.1f} "
                   f"preview={self.prog.preview_size} detail={gl_start}->{gl_end}", flush=True)
         return 0

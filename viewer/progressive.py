@@ -221,10 +221,14 @@ class Progressive:
         self.preview_fbo.viewport = (0, 0, pw, ph)
         self.preview_fbo.use()
         ctx.disable(moderngl.BLEND)
-        # bands of at most MAX_DRAW_PIXELS keep each draw call short
+        # bands of at most MAX_DRAW_PIXELS keep each draw call short; no
+        # culling variant is compiled while things move (a new one takes up
+        # to a second on llvmpipe, and orbiting meets new ones all the time:
+        # bench-opaque's previews stalled on most frames with Mesa's shader
+        # cache cold): ready variants or the full shader draw the preview
         rows = max(1, MAX_DRAW_PIXELS // pw)
         for y in range(0, ph, rows):
-            self.renderer.draw_sample(pw, ph, (0.5, 0.5), (0, y, pw, min(rows, ph - y)))
+            self.renderer.draw_sample(pw, ph, (0.5, 0.5), (0, y, pw, min(rows, ph - y)), compile=False)
         ctx.finish()
         dt = time.perf_counter() - t0
         self._note_cost(dt, pw * ph)

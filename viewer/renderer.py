@@ -60,6 +60,7 @@ class Renderer:
         self.extra_defines = dict(extra_defines or {})
         self._programs: dict[tuple, moderngl.Program] = {}
         self._subset_programs: dict[tuple, moderngl.Program] = {}
+        self._subset_of: dict[tuple, tuple[frozenset, tuple]] = {}   # program key -> (objects, extra defines)
         self._plans: dict[tuple, list] = {}
         self._plan_key = None
         self._vao_for: dict[int, moderngl.VertexArray] = {}
@@ -130,14 +131,18 @@ class Renderer:
     # ------------------------------------------------------------ drawing
 
     def draw_sample(self, width: int, height: int, offset: tuple[float, float],
-                    viewport: tuple[int, int, int, int] | None = None) -> None:
+                    viewport: tuple[int, int, int, int] | None = None, compile: bool = True) -> None:
         """Trace one sample per pixel of the bound framebuffer (additively if
         blending is on).  viewport limits the work to a rectangle (x, y, w, h)
         in framebuffer pixels, bottom-left origin.  The specialised shader
         draws each group of screen tiles with a variant compiled for the
-        objects its rays can meet (viewer/culling.py); the image is the same."""
+        objects its rays can meet (viewer/culling.py); the image is the same.
+        compile=False compiles nothing new (the viewer's previews while the
+        camera moves: a compile on llvmpipe takes up to a second): a group
+        whose variant is not ready is drawn with a ready variant for more
+        objects, or with the full shader."""
         if self.program is self._main and self.culls():
-            for prog, rects in self._culled(width, height):
+            for prog, rects in self._culled(width, height, compile=compile):
                 self.bind(prog, width, height, offset)
                 vao = self.vao_of(prog)
                 for rect in rects:
@@ -172,7 +177,7 @@ class Renderer:
         return self._culled(width, height, defines, compile_all)
 
     def _culled(self, width: int, height: int, extra: dict | None = None,
-                compile_all: bool = False) -> list[tuple[moderngl.Program, tuple]]:
+                compile_all: bool = False, compile: bool = True) -> list[tuple[moderngl.Program, tuple]]:
         """The culling plan of this camera and size, its programs (with the
         `extra` defines) compiled."""
         from . import culling
@@ -189,39 +194,62 @@ class Renderer:
         if done is not None:
             return done
         # Compile at most COMPILES_PER_DRAW new variants per call (a compile
-        # costs up to seconds on llvmpipe); until its variant is ready a
-        # group is drawn with the scene's full shader, which is exact
-        # everywhere.
+        # costs up to seconds on llvmpipe), none with compile=False; until
+        # its variant is ready a group is drawn with the ready variant of
+        # the fewest objects that holds all of its own (exact there too: it
+        # only tests more objects), or else the scene's full shader, which
+        # is exact everywhere.
         full = self.variant(**extra) if extra else self._main
         everything = tuple(range(len(self.scene.objects)))
+        budget = len(self._plan_groups) if compile_all else (self.COMPILES_PER_DRAW if compile else 0)
         compiled, complete, progs = 0, True, []
         for subset, rects in self._plan_groups:
             prog = full
             if subset != everything:
                 defines = {**shader_defines(self.scene, True, self.fresnel, subset), **self.extra_defines, **extra}
                 k = self._program_key(defines)
-                if k in self._subset_programs or compile_all or compiled < self.COMPILES_PER_DRAW:
+                if k in self._subset_programs or compiled < budget:
                     compiled += k not in self._subset_programs
-                    prog = self._subset_program(k, defines)
+                    prog = self._subset_program(k, defines, subset, extra_key)
                 else:
                     complete = False
+                    prog = self._ready_superset(subset, extra_key) or full
             progs.append((prog, rects))
         if complete:
             self._plans[extra_key] = progs
         return progs
 
-    def _subset_program(self, key: tuple, defines: dict) -> moderngl.Program:
+    def _ready_superset(self, subset: tuple[int, ...], extra_key: tuple) -> moderngl.Program | None:
+        """The compiled variant (with the same extra defines) of the fewest
+        objects that include `subset`, or None.  A variant compiled for an
+        earlier scene counts only if it is still the one its objects would
+        get (its defines list each object's shape by index)."""
+        from .gpu_scene import shader_defines
+
+        want = set(subset)
+        for key, (objs, ek) in sorted(self._subset_of.items(), key=lambda kv: len(kv[1][0])):
+            if ek == extra_key and want <= objs:
+                defines = {**shader_defines(self.scene, True, self.fresnel, tuple(sorted(objs))),
+                           **self.extra_defines, **dict(extra_key)}
+                if self._program_key(defines) == key:
+                    return self._subset_programs[key]
+        return None
+
+    def _subset_program(self, key: tuple, defines: dict, subset: tuple[int, ...] = (),
+                        extra_key: tuple = ()) -> moderngl.Program:
         """A culling variant, from a cache of the SUBSET_PROGRAMS most
         recently used (a viewer orbiting a scene meets new subsets all the
         time; the GL objects must not pile up)."""
         prog = self._subset_programs.pop(key, None)
         if prog is None:
             prog = build_program(self.ctx, defines=defines)
+            self._subset_of[key] = (frozenset(subset), extra_key)
         self._subset_programs[key] = prog          # most recent last
         in_use = {id(p) for plan in self._plans.values() for p, _ in plan}
         while len(self._subset_programs) > self.SUBSET_PROGRAMS:
             old_key = next(k for k, p in self._subset_programs.items() if id(p) not in in_use and k != key)
             old = self._subset_programs.pop(old_key)
+            self._subset_of.pop(old_key, None)
             vao = self._vao_for.pop(id(old), None)
             if vao is not None:
                 vao.release()
@@ -352,6 +380,7 @@ class Renderer:
         for prog in (*self._programs.values(), *self._subset_programs.values()):
             prog.release()
         self._subset_programs.clear()
+        self._subset_of.clear()
         for res in (self._ubo, self._sky):
             if res is not None:
                 res.release()
