@@ -295,3 +295,39 @@ def test_draws_that_may_not_compile_use_ready_variants_or_the_full_shader(gl):
     finally:
         r.release()
         full.release()
+
+
+def test_a_small_variant_cache_never_draws_with_an_evicted_program(gl):
+    """With room for 2 variants and plans of up to 4, a compile evicts the
+    least recently used variant: never one the same draw uses (it was
+    released, and the draw failed with an invalid program before), and the
+    image stays the full shader's.  25 cameras orbit (10 did not meet the case); every other draw may
+    compile."""
+    import moderngl
+    scene = copy.deepcopy(load_scene("bench-opaque"))
+    w, h = 64, 36
+    r = Renderer(gl, scene)
+    r.SUBSET_PROGRAMS = 2
+    full = Renderer(gl, scene)
+    full.cull = False
+
+    def draw(renderer, compile):
+        fbo = renderer._target(w, h)
+        fbo.use()
+        gl.disable(moderngl.BLEND)
+        renderer.draw_sample(w, h, (0.5, 0.5), compile=compile)
+        return renderer._read_rgb(fbo)
+
+    rng = np.random.default_rng(1)
+    t = np.array(scene.camera.target)
+    try:
+        for i in range(25):
+            az, el, d = rng.uniform(0, 2 * math.pi), rng.uniform(0.1, 1.0), rng.uniform(3, 9)
+            scene.camera.position = tuple(t + d * np.array([math.cos(el) * math.cos(az), math.sin(el),
+                                                            math.cos(el) * math.sin(az)]))
+            r.set_scene(scene)
+            full.set_scene(scene)
+            assert np.array_equal(draw(r, i % 2 == 1), draw(full, True)), i
+    finally:
+        r.release()
+        full.release()

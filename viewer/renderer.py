@@ -210,7 +210,7 @@ class Renderer:
                 k = self._program_key(defines)
                 if k in self._subset_programs or compiled < budget:
                     compiled += k not in self._subset_programs
-                    prog = self._subset_program(k, defines, subset, extra_key)
+                    prog = self._subset_program(k, defines, subset, extra_key, keep=[p for p, _ in progs])
                 else:
                     complete = False
                     prog = self._ready_superset(subset, extra_key) or full
@@ -232,22 +232,30 @@ class Renderer:
                 defines = {**shader_defines(self.scene, True, self.fresnel, tuple(sorted(objs))),
                            **self.extra_defines, **dict(extra_key)}
                 if self._program_key(defines) == key:
-                    return self._subset_programs[key]
+                    # most recently used now: a compile later in the same
+                    # call evicts the least recent, never what it draws with
+                    prog = self._subset_programs.pop(key)
+                    self._subset_programs[key] = prog
+                    return prog
         return None
 
     def _subset_program(self, key: tuple, defines: dict, subset: tuple[int, ...] = (),
-                        extra_key: tuple = ()) -> moderngl.Program:
+                        extra_key: tuple = (), keep: list | None = None) -> moderngl.Program:
         """A culling variant, from a cache of the SUBSET_PROGRAMS most
         recently used (a viewer orbiting a scene meets new subsets all the
-        time; the GL objects must not pile up)."""
+        time; the GL objects must not pile up).  Never evicted: the programs
+        of complete plans and `keep` (what the caller draws with next); when
+        everything is in use the cache holds more for a while."""
         prog = self._subset_programs.pop(key, None)
         if prog is None:
             prog = build_program(self.ctx, defines=defines)
             self._subset_of[key] = (frozenset(subset), extra_key)
         self._subset_programs[key] = prog          # most recent last
-        in_use = {id(p) for plan in self._plans.values() for p, _ in plan}
+        in_use = {id(p) for plan in self._plans.values() for p, _ in plan} | {id(p) for p in keep or ()}
         while len(self._subset_programs) > self.SUBSET_PROGRAMS:
-            old_key = next(k for k, p in self._subset_programs.items() if id(p) not in in_use and k != key)
+            old_key = next((k for k, p in self._subset_programs.items() if id(p) not in in_use and k != key), None)
+            if old_key is None:
+                break
             old = self._subset_programs.pop(old_key)
             self._subset_of.pop(old_key, None)
             vao = self._vao_for.pop(id(old), None)
