@@ -301,8 +301,8 @@ def test_a_small_variant_cache_never_draws_with_an_evicted_program(gl):
     """With room for 2 variants and plans of up to 4, a compile evicts the
     least recently used variant: never one the same draw uses (it was
     released, and the draw failed with an invalid program before), and the
-    image stays the full shader's.  25 cameras orbit (10 did not meet the case); every other draw may
-    compile."""
+    image stays the full shader's.  25 cameras orbit (10 did not meet the
+    case); every other draw may compile."""
     import moderngl
     scene = copy.deepcopy(load_scene("bench-opaque"))
     w, h = 64, 36
