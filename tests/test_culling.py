@@ -38,6 +38,23 @@ def _same(gl, scene, w, h, samples=1):
     return a, b, plan
 
 
+def _orbit(target, az: float, el: float, dist: float) -> tuple:
+    """The point at azimuth az and elevation el (radians), dist from target."""
+    return tuple(np.asarray(target, float) + dist * np.array([math.cos(el) * math.cos(az), math.sin(el),
+                                                              math.cos(el) * math.sin(az)]))
+
+
+def _draw_one_sample(gl, renderer, w: int, h: int, compile: bool) -> np.ndarray:
+    """One centred sample per pixel through draw_sample (as the viewer's
+    previews draw), read back."""
+    import moderngl
+    fbo = renderer._target(w, h)
+    fbo.use()
+    gl.disable(moderngl.BLEND)
+    renderer.draw_sample(w, h, (0.5, 0.5), compile=compile)
+    return renderer._read_rgb(fbo)
+
+
 @pytest.mark.parametrize("name", ["default", "bench-opaque", "glass-sphere", "mirror-ball", "glass-rod-x",
                                   "coloured-liquid", "whitted-exact"])
 def test_culled_image_equals_the_full_shader(gl, name):
@@ -120,9 +137,7 @@ def test_random_cameras_and_lights_give_the_same_image(gl, az, el, dist, lx, lz,
     scene (shadows everywhere, tiles of every kind)."""
     base = load_scene("bench-opaque")
     scene = copy.deepcopy(base)
-    t = np.array(scene.camera.target)
-    scene.camera.position = tuple(t + dist * np.array([math.cos(el) * math.cos(az), math.sin(el),
-                                                       math.cos(el) * math.sin(az)]))
+    scene.camera.position = _orbit(scene.camera.target, az, el, dist)
     scene.lights[0].position = (lx, ly, lz)
     a, b, _ = _same(gl, with_overrides(scene, samples=1), 64, 36)
     assert np.array_equal(a, b)
@@ -256,7 +271,6 @@ def test_draws_that_may_not_compile_use_ready_variants_or_the_full_shader(gl):
     another camera's variants were compiled, those of them that hold a
     group's objects; after a change of scene, never a variant whose object
     list no longer matches."""
-    import moderngl
     scene = copy.deepcopy(load_scene("bench-opaque"))
     w, h = 96, 54
     full = Renderer(gl, scene)
@@ -264,11 +278,7 @@ def test_draws_that_may_not_compile_use_ready_variants_or_the_full_shader(gl):
     r = Renderer(gl, scene)
 
     def draw(renderer, compile):
-        fbo = renderer._target(w, h)
-        fbo.use()
-        gl.disable(moderngl.BLEND)
-        renderer.draw_sample(w, h, (0.5, 0.5), compile=compile)
-        return renderer._read_rgb(fbo)
+        return _draw_one_sample(gl, renderer, w, h, compile)
 
     try:
         assert np.array_equal(draw(r, False), draw(full, True))
@@ -303,7 +313,6 @@ def test_a_small_variant_cache_never_draws_with_an_evicted_program(gl):
     released, and the draw failed with an invalid program before), and the
     image stays the full shader's.  25 cameras orbit (10 did not meet the
     case); every other draw may compile."""
-    import moderngl
     scene = copy.deepcopy(load_scene("bench-opaque"))
     w, h = 64, 36
     r = Renderer(gl, scene)
@@ -312,19 +321,14 @@ def test_a_small_variant_cache_never_draws_with_an_evicted_program(gl):
     full.cull = False
 
     def draw(renderer, compile):
-        fbo = renderer._target(w, h)
-        fbo.use()
-        gl.disable(moderngl.BLEND)
-        renderer.draw_sample(w, h, (0.5, 0.5), compile=compile)
-        return renderer._read_rgb(fbo)
+        return _draw_one_sample(gl, renderer, w, h, compile)
 
     rng = np.random.default_rng(1)
-    t = np.array(scene.camera.target)
+    t = scene.camera.target
     try:
         for i in range(25):
             az, el, d = rng.uniform(0, 2 * math.pi), rng.uniform(0.1, 1.0), rng.uniform(3, 9)
-            scene.camera.position = tuple(t + d * np.array([math.cos(el) * math.cos(az), math.sin(el),
-                                                            math.cos(el) * math.sin(az)]))
+            scene.camera.position = _orbit(t, az, el, d)
             r.set_scene(scene)
             full.set_scene(scene)
             assert np.array_equal(draw(r, i % 2 == 1), draw(full, True)), i
@@ -364,7 +368,7 @@ def _random_scene(rng):
         else:
             lights.append({"position": rv([-6, -1, -6], [6, 8, 6])})
     az, el, dist = rng.uniform(0, 2 * math.pi), rng.uniform(-0.3, 1.2), rng.uniform(3, 14)
-    eye = [dist * math.cos(el) * math.cos(az), 1 + dist * math.sin(el), dist * math.cos(el) * math.sin(az)]
+    eye = list(_orbit((0.0, 1.0, 0.0), az, el, dist))
     return scene_from_dict({
         "camera": {"position": eye, "target": rv([-1, 0, -1], [1, 1.5, 1]), "fov": float(rng.uniform(20, 90))},
         "render": {"max_depth": 4},

@@ -71,14 +71,16 @@ def _unit(v: np.ndarray) -> np.ndarray:
 
 
 def _segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray | None, direction: np.ndarray | None) -> np.ndarray:
-    """Distance from points p (..., 3) to the segment a-b, or to the ray from
-    a along `direction` when b is None."""
+    """Distance from points p (n, 3) to the segment a-b, or to the ray from
+    a along `direction` when b is None; a (and b) may be (..., 3) stacks of
+    segments: the result is (..., n)."""
+    a = np.asarray(a, dtype=np.float64)[..., None, :]                   # (..., 1, 3)
     if b is None:
-        ab = direction
+        ab = np.asarray(direction, dtype=np.float64)
         t = np.maximum(np.sum((p - a) * ab, axis=-1) / np.dot(ab, ab), 0.0)
     else:
-        ab = b - a
-        denom = max(float(np.dot(ab, ab)), 1e-300)
+        ab = np.asarray(b, dtype=np.float64)[..., None, :] - a
+        denom = np.maximum(np.sum(ab * ab, axis=-1), 1e-300)
         t = np.clip(np.sum((p - a) * ab, axis=-1) / denom, 0.0, 1.0)
     return np.linalg.norm(p - (a + t[..., None] * ab), axis=-1)
 
@@ -87,17 +89,11 @@ def _capsule_meets(centres: np.ndarray, radii: np.ndarray, c: np.ndarray, rad, l
     """Which spheres (centres (n, 3), radii (n,)) meet the capsule swept by a
     sphere (c (..., 3), rad (...)) toward `light` (to its position, or
     half-infinite against a directional light's direction): (..., n)."""
-    c = np.asarray(c, dtype=np.float64)[..., None, :]                  # (..., 1, 3)
-    rad = np.asarray(rad, dtype=np.float64)[..., None]
     if light.type == "directional":
-        ab = -np.array(unit_vector(light.direction), dtype=np.float64)
-        t = np.maximum(np.sum((centres - c) * ab, axis=-1) / np.dot(ab, ab), 0.0)
+        dist = _segment_distance(centres, c, None, -np.array(unit_vector(light.direction)))
     else:
-        ab = np.array(light.position, dtype=np.float64) - c
-        denom = np.maximum(np.sum(ab * ab, axis=-1), 1e-300)
-        t = np.clip(np.sum((centres - c) * ab, axis=-1) / denom, 0.0, 1.0)
-    dist = np.linalg.norm(centres - (c + t[..., None] * ab), axis=-1)
-    return dist < radii + rad
+        dist = _segment_distance(centres, c, np.array(light.position, dtype=np.float64), None)
+    return dist < radii + np.asarray(rad, dtype=np.float64)[..., None]
 
 
 def support(obj, n: np.ndarray) -> np.ndarray:
