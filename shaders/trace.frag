@@ -39,13 +39,18 @@ uniform sampler2D sampleOffsets;
 uniform int chunkStart;
 uniform int chunkSize;
 #endif
+#ifdef FOOTPRINT_AA
+#include "lib/footprint.glsl"
+#endif
 #ifdef ADAPTIVE_FIRST
-layout(location = 2) out vec4 fragFirstHit;     // (t, object index, 0, 0); (INF, -1) for the sky
+layout(location = 2) out vec4 fragFirstHit;     // (t, object index, rays, 0); (INF, -1) for the sky
+layout(location = 3) out vec4 fragFirstChecker; // rgb: firstChecker (exposure applied); a: footprint kind
 #endif
 #endif
 #ifdef ADAPTIVE_FIRST
 float firstT = INF;
 int firstObject = -1;
+vec3 firstChecker = vec3(0.0);
 #define RECORD_FIRST(br, it) if (br.depth == 1) { firstT = length(it.p - br.o); firstObject = it.object; }
 #else
 #define RECORD_FIRST(br, it)
@@ -339,8 +344,9 @@ Surface surfaceAt(Material m, vec3 p) {
     return s;
 }
 
-// E + C * (k_a A + sum_j L_j V_j [n.l > 0] (k_d n.l + k_s max(0, r.v)^p))
-vec3 shadeLocal(Material m, Surface s, vec3 p, vec3 n, vec3 v, uint mask) {
+// The light a surface's colour C takes at p, the bracket of
+// E + C * (k_a A + sum_j L_j V_j [n.l > 0] (k_d n.l + k_s max(0, r.v)^p)).
+vec3 lightAt(Material m, vec3 p, vec3 n, vec3 v, uint mask) {
     vec3 lit = m.colorAmbient.a * ambient.rgb;
 #ifdef HAS_LIGHTS
     float kd = m.phong.x, ks = m.phong.y;
@@ -367,7 +373,7 @@ vec3 shadeLocal(Material m, Surface s, vec3 p, vec3 n, vec3 v, uint mask) {
         }
     }
 #endif
-    return s.emission + s.color * lit;
+    return lit;
 }
 
 // ---------------------------------------------------------------- the ray tree
@@ -396,7 +402,21 @@ void walkNode(Branch br, inout vec3 sum, out Branch reflected, out Branch refrac
     Material m = materials[objects[it.object].info.y];
     vec3 n = dot(it.n, br.d) < 0.0 ? it.n : -it.n;     // facing the ray
     Surface s = surfaceAt(m, it.p);
-    sum += w * shadeLocal(m, s, it.p, n, -br.d, mask);
+#ifdef FOOTPRINT_AA
+    // a camera ray on the checkered plane its pixel's footprint lies on:
+    // the checker's colours mixed by their share of the pixel
+    if (br.depth == 1 && it.object == footprintObject && footprintShare >= 0.0)
+        s = Surface(mix(m.colorAmbient.rgb, m.checkerColor.rgb, footprintShare),
+                    mix(m.emission.rgb, m.checkerEmission.rgb, footprintShare));
+#endif
+    vec3 lit = lightAt(m, it.p, n, -br.d, mask);
+    sum += w * (s.emission + s.color * lit);
+#ifdef ADAPTIVE_FIRST
+    // what the checker's second colour adds to the camera ray's radiance
+    // (0 off it): the adaptive flags take it out where footprint samples
+    // take the checker exactly
+    if (br.depth == 1) firstChecker = w * ((s.emission - m.emission.rgb) + (s.color - m.colorAmbient.rgb) * lit);
+#endif
     if (br.depth >= iparams.x) return;                  // children would exceed max_depth
 #ifdef HAS_DIELECTRIC
     if (it.dielectric) {
@@ -484,8 +504,14 @@ void main() {
     fragMoments = vec4(0.0);
     if (listed.x < 0) return;
     int end = min(listed.w, chunkStart + chunkSize);
+#ifdef FOOTPRINT_AA
+    setFootprintPixel(vec2(listed.xy));
+#endif
     for (int b = chunkStart; b < end; ++b) {
         vec2 offset = texelFetch(sampleOffsets, ivec2(listed.z + b, 0), 0).xy;
+#ifdef FOOTPRINT_AA
+        setFootprintSample(offset);
+#endif
         vec3 Lb = radiance(vec3(0.0), cameraRay(vec2(listed.xy), offset)) * params.w;
         fragColor += vec4(Lb, 1.0);
         fragMoments.x += dot(Lb, Lb);
@@ -493,6 +519,10 @@ void main() {
 #else
     vec2 ij = vec2(floor(gl_FragCoord.x), imageSize.y - 1.0 - floor(gl_FragCoord.y));
     vec3 dir = cameraRay(ij, sampleOffset);
+#ifdef FOOTPRINT_AA
+    setFootprintPixel(ij);
+    setFootprintSample(sampleOffset);
+#endif
 #if defined(VIEW_MODE) && VIEW_MODE == 3
     radiance(vec3(0.0), dir);
     fragColor = vec4(float(rayCount), 0.0, 0.0, 1.0);
@@ -506,6 +536,14 @@ void main() {
 #endif
 #ifdef ADAPTIVE_FIRST
     fragFirstHit = vec4(firstT, float(firstObject), float(rayCount), 0.0);
+    // a: how this pixel's footprint samples take the checker: 2 exactly
+    // over the pixel, 1 along their rows, 0 not at all (point samples)
+#ifdef FOOTPRINT_AA
+    float kind = pixelShare >= 0.0 ? 2.0 : (footprintShare >= 0.0 ? 1.0 : 0.0);
+#else
+    float kind = 0.0;
+#endif
+    fragFirstChecker = vec4(firstChecker * params.w, kind);
 #endif
 #endif
 #endif  // ADAPTIVE_LIST

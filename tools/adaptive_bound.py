@@ -211,7 +211,7 @@ def measure(names: list[str]) -> list[dict]:
         expected = np.sqrt(sq / len(SEEDS))
         table = {"real": [], "estimate": [], "expected": [], "greedy": []}
         for b in BUDGETS:
-            table["real"].append(rmse(adaptive.render_adaptive(r, W, H, b, seed=bench.RENDER_SEED).image, ref))
+            table["real"].append(rmse(adaptive.render_adaptive(r, W, H, b, seed=bench.RENDER_SEED, footprint=False).image, ref))
             job = AdaptiveRender(r, W, H, b, seed=bench.RENDER_SEED, sampler=ReplaySampler(rec))
             table["estimate"].append(rmse(job.run().image, ref))
             job = ExpectedErrorRender(r, W, H, b, seed=bench.RENDER_SEED, sampler=ReplaySampler(rec))

@@ -3,7 +3,8 @@ README's "Adaptive anti-aliasing" section (issue 7).
 
 For each scene at 320x180: uniform renders at 16, 32 and 64 samples and
 adaptive renders (``viewer.adaptive.render_adaptive``, default target) at
-budgets of 8, 16, 24 and 32 rays per pixel, each rendered once untimed (the
+budgets of 4 to 32 rays per pixel, with footprint samples on the checker
+(the default) and, as ``adaptive-point``, without, each rendered once untimed (the
 image compared) and then timed in 5 interleaved rounds (order reversed
 every other round; medians of wall-clock and process CPU time).  Errors are
 RMSE (linear) against two float64 references (``viewer.reference``) of 512
@@ -42,7 +43,9 @@ W, H = 320, 180
 REFERENCE_SAMPLES = 512
 OUT = Path("bench-results/adaptive")
 SETTINGS = [("uniform", 16), ("uniform", 32), ("uniform", 64),
-            ("adaptive", 8), ("adaptive", 16), ("adaptive", 24), ("adaptive", 32)]
+            ("adaptive", 4), ("adaptive", 6), ("adaptive", 8), ("adaptive", 12), ("adaptive", 16),
+            ("adaptive", 24), ("adaptive", 32),
+            ("adaptive-point", 8), ("adaptive-point", 16), ("adaptive-point", 24), ("adaptive-point", 32)]
 REPEAT = 5
 
 
@@ -90,12 +93,17 @@ def measure(names: list[str]) -> None:
         refs = {"bench": bench.reference_image(scene, name, W, H, REFERENCE_SAMPLES, OUT)[0],
                 "own": np.load(own_reference_path(name))}
         r = Renderer(ctx, scene)
-        AdaptiveSampler(r, W, H).compile()
+        # room for every variant the settings use (uniform, and adaptive with
+        # and without footprint samples, per culling group): no recompiles
+        # inside the timed runs
+        r.SUBSET_PROGRAMS = 64
+        for footprint in (False, True):
+            AdaptiveSampler(r, W, H, footprint=footprint).compile()
 
         def run(kind, n):
             if kind == "uniform":
                 return r.render(W, H, n, seed=bench.RENDER_SEED), float(n), float(n)
-            res = render_adaptive(r, W, H, n, seed=bench.RENDER_SEED)
+            res = render_adaptive(r, W, H, n, seed=bench.RENDER_SEED, footprint=False if kind == "adaptive-point" else None)
             return res.image, res.mean_spp, res.rays / (W * H)
 
         info = {}

@@ -34,11 +34,28 @@ picture inside glass); a flat region is exact with one centred sample.  So:
    sample through glass costs several of one on the floor), as many as
    ROUND_SHARE of the budget left pays for (at least MIN_ROUND of the
    whole).
-3. The budget is samples x W x H rays in all (the corner rays included),
+3. Footprint samples: where a pixel's four corner rays meet one checkered
+   plane first (and so, the set of directions that meet a plane being
+   convex, does its whole square, unless another object pokes in), a
+   camera ray that meets that plane takes the checker's colours mixed by
+   their exact shares of the pixel's square (the box filter, in closed
+   form: shaders/lib/footprint.glsl) instead of the colour at its point;
+   its lighting stays its own.  So a checker edge costs no samples: such a
+   pixel is flagged only by what else differs among its five rays (the
+   checker's part of each ray's colour, which the first pass reports, taken
+   out), and where no other edge crosses it, it ends with one sample.
+   Where too many checker lines cross the pixel for the closed form, each
+   sample takes the checker's exact average along its row of the pixel,
+   and the pixel is flagged as a point-sampled one; nearer the horizon,
+   point samples.  On by default where the scene has a checkered plane
+   (footprint=False: point samples only).  The corner rays are traced
+   before the first pass, which then already takes footprint samples.
+4. The budget is samples x W x H rays in all (the corner rays included),
    one pixel taking at most MAX_SPP_FACTOR x samples; the render stops when
    it is spent or no pixel is above the target.  Below 3 samples per pixel
    the corner rays would take most of the budget: there the 3x3
-   neighbourhood of centres says where edges may be.
+   neighbourhood of centres says where edges may be (and no footprint
+   samples are taken).
 
 Measured (README, "Adaptive anti-aliasing"; tools/adaptive_vs_uniform.py):
 against a 512-sample float64 reference on glass-sphere at 320x180 this
@@ -110,6 +127,12 @@ SPREAD_EXPONENT = 0.75
 SPREAD_WEIGHT = 0.5
 #: A pixel's error is at least this share of its worst neighbour's.
 NEIGHBOUR_SHARE = 0.25
+#: Footprint samples name their plane in an 8-bit texel (k + 1): scenes with
+#: more objects take point samples only.
+MAX_FOOTPRINT_OBJECTS = 255
+#: How a pixel's footprint samples take the checker (the first pass reports
+#: it): over the whole pixel, exactly, or along each sample's row.
+FOOTPRINT_EXACT, FOOTPRINT_ROWS = 2, 1
 #: Share of the budget left that one round may spend (the rest waits for
 #: the better estimates the round brings), and the least share of the
 #: whole budget a round may spend (no long tail of tiny rounds: each costs
@@ -241,6 +264,32 @@ def checker_cells_differ(scene, t: np.ndarray, obj: np.ndarray) -> np.ndarray:
         q = _corners(cells)
         out |= same & (_fold(np.maximum, q) != _fold(np.minimum, q))
     return out
+
+
+def checkered_planes(scene) -> np.ndarray:
+    """(objects + 1,) bool: which objects are planes with a checker whose two
+    colours differ (the last entry, for the sky's -1, is False)."""
+    out = np.zeros(len(scene.objects) + 1, bool)
+    for k, o in enumerate(scene.objects):
+        m = scene.materials[o.material]
+        c = m.checker
+        out[k] = o.type == "plane" and c is not None and (
+            tuple(c.color) != tuple(m.color) or (c.emission is not None and tuple(c.emission) != tuple(m.emission)))
+    return out
+
+
+def footprint_planes(scene, corner_obj: np.ndarray) -> np.ndarray:
+    """(H, W) int: for each pixel whose four corner rays all meet one
+    checkered plane first (corner_obj (H + 1, W + 1)), that plane's object
+    index, else -1.  There footprint samples replace point samples.  The
+    directions that meet a plane are a convex set, so every ray of such a
+    pixel meets that plane; only another object poking in between the
+    corners could cover part of it (then a sample that meets the other
+    object is a point sample, and the flags see the other object in the
+    centre ray)."""
+    four = _corners(corner_obj)
+    hi, lo = _fold(np.maximum, four), _fold(np.minimum, four)
+    return np.where((hi == lo) & checkered_planes(scene)[np.where(lo >= 0, lo, -1)], lo, -1)
 
 
 class Sums(NamedTuple):
@@ -490,9 +539,18 @@ class AdaptiveSampler:
 
     FIRST = {"ADAPTIVE": 1, "ADAPTIVE_FIRST": 1}
     LIST = {"ADAPTIVE": 1, "ADAPTIVE_LIST": 1}
+    #: the first and list passes' defines with footprint samples (trace.frag)
+    FOOTPRINT_FIRST = {**FIRST, "FOOTPRINT_AA": 1}
+    FOOTPRINT_LIST = {**LIST, "FOOTPRINT_AA": 1}
+    #: the texture unit of the footprint mask
+    FOOTPRINT_UNIT = 3
 
-    def __init__(self, renderer, width: int, height: int):
+    def __init__(self, renderer, width: int, height: int, footprint: bool = False):
         self.renderer = renderer
+        #: whether set_footprint may turn footprint samples on (their variants
+        #: are the ones compile() makes)
+        self.footprint = bool(footprint)
+        self._footprint_tex = None           # the mask set_footprint gave (None: point samples)
         self.ctx: moderngl.Context = renderer.ctx
         self.width, self.height = width, height
         self._list_tex = None
@@ -507,6 +565,13 @@ class AdaptiveSampler:
         self.fragments_per_draw = FRAGMENTS_PER_DRAW
         self.last_draw_fragments = 0     # pixel-samples the latest draw traced
         self._in_flight = None           # (list framebuffer, texel of each entry) during add_samples
+        #: what the checker's second colour adds to the colours the latest
+        #: first pass ((H, W, 3)) and corner pass ((H + 1, W + 1, 3)) gave
+        #: (0 off a checker; exposure applied)
+        self.centre_checker = self.corner_checker = None
+        #: (H, W) int8 from the latest first pass: how each pixel's footprint
+        #: samples take the checker (FOOTPRINT_EXACT, FOOTPRINT_ROWS or 0: not)
+        self.footprint_kind = None
 
     def _programs(self, defines: dict) -> list[tuple[moderngl.Program, tuple]]:
         """The renderer's (program, rectangles) pairs of these variant
@@ -517,9 +582,41 @@ class AdaptiveSampler:
     def compile(self) -> None:
         """Compile every shader variant the passes use at this size and
         camera now (the viewer's soak counts GL objects after it)."""
-        for defines in (self.FIRST, self.LIST):
+        for defines in ((self.FOOTPRINT_FIRST, self.FOOTPRINT_LIST) if self.footprint else (self.FIRST, self.LIST)):
             self.renderer.programs_for(self.width, self.height, compile_all=True, **defines)
         self.renderer.variant(**self.FIRST)              # the corner pass's (not culled)
+
+    @property
+    def first_defines(self) -> dict:
+        return self.FOOTPRINT_FIRST if self._footprint_tex is not None else self.FIRST
+
+    @property
+    def list_defines(self) -> dict:
+        return self.FOOTPRINT_LIST if self._footprint_tex is not None else self.LIST
+
+    def set_footprint(self, planes: np.ndarray | None) -> None:
+        """Footprint samples (shaders/lib/footprint.glsl) from now on: on the
+        plane `planes` gives for each pixel ((H, W) object index, -1: point
+        samples; top row first; see footprint_planes), or point samples
+        everywhere (None)."""
+        if self._footprint_tex is not None:
+            self._footprint_tex.release()
+            self._footprint_tex = None
+        if planes is None:
+            return
+        if not self.footprint:
+            raise ValueError("footprint samples need an AdaptiveSampler made with footprint=True")
+        if planes.max() >= MAX_FOOTPRINT_OBJECTS:
+            raise ValueError(f"footprint samples take object indices below {MAX_FOOTPRINT_OBJECTS}")
+        # texel: (k + 1) / 255 in an 8-bit normalised texture, rows bottom first
+        data = np.ascontiguousarray((planes[::-1] + 1).astype(np.uint8))
+        self._footprint_tex = self.ctx.texture((self.width, self.height), 1, data.tobytes())
+        self._footprint_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+
+    def _bind_footprint(self, prog) -> None:
+        if self._footprint_tex is not None and "footprintMask" in prog:
+            self._footprint_tex.use(location=self.FOOTPRINT_UNIT)
+            prog["footprintMask"].value = self.FOOTPRINT_UNIT
 
     def group_labels(self, programs) -> np.ndarray:
         """(H, W) int8, top row first: which of `programs`' groups of
@@ -536,12 +633,13 @@ class AdaptiveSampler:
         return self._labels
 
     def _mrt_target(self, size) -> moderngl.Framebuffer:
-        """Three RGBA32F targets of `size` for the ADAPTIVE_FIRST variants
-        (sums, square, first interaction), kept for the sampler's life: at
-        1280x720 making them costs as much as a sample of the sky."""
+        """Four RGBA32F targets of `size` for the ADAPTIVE_FIRST variants
+        (sums, square, first interaction, the checker's part), kept for the
+        sampler's life: at 1280x720 making them costs as much as a sample of
+        the sky."""
         fbo = self._mrt.get(size)
         if fbo is None:
-            texs = [self.ctx.texture(size, 4, dtype="f4") for _ in range(3)]
+            texs = [self.ctx.texture(size, 4, dtype="f4") for _ in range(4)]
             fbo = self._mrt[size] = self.ctx.framebuffer(color_attachments=texs)
         return fbo
 
@@ -549,7 +647,7 @@ class AdaptiveSampler:
         """Draw one sample of the ADAPTIVE_FIRST variants into the three
         targets of `size`, in bands of rows (one draw call each, a yield
         after each); band_programs() gives the (program, rects) to draw a
-        band with.  Returns the three attachments, top row first."""
+        band with.  Returns the four attachments, top row first."""
         ctx, (w, h) = self.ctx, size
         fbo = self._mrt_target(size)
         try:
@@ -563,6 +661,7 @@ class AdaptiveSampler:
                 ctx.disable(moderngl.BLEND)
                 for prog, rects in band_programs():
                     self.renderer.bind(prog, self.width, self.height, offset)
+                    self._bind_footprint(prog)
                     vao = self.renderer.vao_of(prog)
                     for rect in rects:
                         clipped = intersect_rect(rect, band)
@@ -574,9 +673,10 @@ class AdaptiveSampler:
                 ctx.scissor = None
                 top += rows
                 yield
-            # only the channels the attachments use: (sum L, 1), L.L, (t, object, rays)
+            # only the channels the attachments use: (sum L, 1), L.L, (t, object, rays),
+            # (checker part, footprint kind)
             return [np.frombuffer(fbo.read(attachment=k, components=c, dtype="f4"), np.float32)
-                    .reshape(h, w, c)[::-1] for k, c in enumerate((4, 1, 3))]
+                    .reshape(h, w, c)[::-1] for k, c in enumerate((4, 1, 3, 4))]
         finally:
             ctx.scissor = None
 
@@ -594,7 +694,9 @@ class AdaptiveSampler:
         reflected, refracted and shadow rays: what Renderer.ray_cost
         counts)."""
         # the programs fetched per band pick up a variant compiled since
-        out = yield from self._mrt_pass((self.width, self.height), lambda: self._programs(self.FIRST), offset)
+        out = yield from self._mrt_pass((self.width, self.height), lambda: self._programs(self.first_defines), offset)
+        self.centre_checker = np.ascontiguousarray(out[3][..., :3], np.float64)
+        self.footprint_kind = np.rint(out[3][..., 3]).astype(np.int8)
         sums = Sums(np.ascontiguousarray(out[0], np.float64), np.ascontiguousarray(out[1][..., 0], np.float64))
         _, obj = self._first_hits(out[2])
         rays = np.rint(out[2][..., 2]).astype(np.int32)
@@ -610,6 +712,7 @@ class AdaptiveSampler:
         first."""
         full = [(self.renderer.variant(**self.FIRST), ((0, 0, self.width + 1, self.height + 1),))]
         out = yield from self._mrt_pass((self.width + 1, self.height + 1), lambda: full, (0.0, 1.0))
+        self.corner_checker = np.ascontiguousarray(out[3][..., :3], np.float64)
         t, obj = self._first_hits(out[2])
         return np.ascontiguousarray(out[0][..., :3], np.float64), t, obj
 
@@ -638,7 +741,7 @@ class AdaptiveSampler:
         (list width, rows, [(group, samples, first row, rows)], texel index
         of each entry)."""
         n = len(pixels)
-        groups = self.group_labels(self._programs(self.LIST)).ravel()[pixels].astype(np.int64)
+        groups = self.group_labels(self._programs(self.list_defines)).ravel()[pixels].astype(np.int64)
         key = groups * (MAX_SPP + 1) + count
         runs_of = [np.flatnonzero(key == k) for k in np.unique(key)]
         lw = list_width(n)
@@ -723,12 +826,13 @@ class AdaptiveSampler:
                     cut = min(rows_per_draw, row0 + rows - y)
                     # (re)bound before every draw: between yields the caller
                     # may have used the context for something else (the viewer)
-                    prog = self._programs(self.LIST)[g][0]
+                    prog = self._programs(self.list_defines)[g][0]
                     self.renderer.bind(prog, w, self.height, (0.5, 0.5))
                     prog["pixelList"].value = 1
                     prog["sampleOffsets"].value = 2
                     prog["chunkStart"].value = k0
                     prog["chunkSize"].value = batch
+                    self._bind_footprint(prog)
                     fbo.use()
                     tex.use(location=1)
                     self._offsets_tex.use(location=2)
@@ -757,6 +861,7 @@ class AdaptiveSampler:
 
     def release(self) -> None:
         self._release_list()
+        self.set_footprint(None)
         if self._offsets_tex is not None:
             self._offsets_tex.release()
             self._offsets_tex = None
@@ -775,7 +880,7 @@ class AdaptiveRender:
 
     def __init__(self, renderer, width: int, height: int, samples: int | None = None,
                  target_error: float = DEFAULT_TARGET_ERROR, seed: int = 0, max_spp: int | None = None,
-                 sampler=None):
+                 sampler=None, footprint: bool | None = None):
         samples = int(samples or renderer.scene.render.samples)
         self.scene = renderer.scene
         self.width, self.height = width, height
@@ -786,8 +891,21 @@ class AdaptiveRender:
         self.offsets = progressive_offsets(self.max_spp, seed)
         # `sampler`: anything with AdaptiveSampler's passes (first_pass,
         # corner_pass, set_offsets, add_samples, release) for this size;
-        # tools/adaptive_bound.py replays recorded samples through one
-        self.sampler = sampler if sampler is not None else AdaptiveSampler(renderer, width, height)
+        # tools/adaptive_bound.py replays recorded samples through one.
+        # Footprint samples (trace.frag's FOOTPRINT_AA) where a pixel's
+        # footprint lies on one checkered plane: on by default where the
+        # scene has one; a sampler given here says whether it takes them.
+        if footprint is None:
+            footprint = (getattr(sampler, "footprint", False) if sampler is not None
+                         else bool(checkered_planes(self.scene).any())
+                         and len(self.scene.objects) < MAX_FOOTPRINT_OBJECTS)
+        self.footprint = bool(footprint)
+        self.sampler = (sampler if sampler is not None
+                        else AdaptiveSampler(renderer, width, height, footprint=self.footprint))
+        #: (H, W) bool: the pixels with footprint samples (None: none yet, or off)
+        self.footprint_mask: np.ndarray | None = None
+        #: every pixel has its first sample (the first pass is done)
+        self.first_pass_done = False
         # every pixel in coherent_order, once: the chosen ones in that order
         # are a mask of it (no sort per round)
         self._coherent = image_coherent_order(width, height)
@@ -896,7 +1014,18 @@ class AdaptiveRender:
         """flags() as a generator that yields between its parts (each about
         0.1 s of numpy at 1280x720: the viewer draws a frame in between)."""
         scene = self.scene
+        fp = None if self.footprint_mask is None else self.sampler.footprint_kind == FOOTPRINT_EXACT
+        if fp is not None:
+            # Pixels whose footprint samples take the checker exactly: their
+            # five rays are compared with the checker's part taken out, so
+            # that only what else varies (a shadow edge, another object)
+            # flags them.  (Those that take it along rows only, and those
+            # too far for either, are flagged as point-sampled ones.)
+            corner_colour = corner_colour - self.sampler.corner_checker
+            centre = np.where(fp[..., None], centre - self.sampler.centre_checker, centre)
         contrast = corner_contrast(corner_colour, centre)
+        if fp is not None:
+            contrast = np.where(fp, contrast, corner_contrast(corner_colour + self.sampler.corner_checker, centre))
         level = max(self.target_error, FLAG_CONTRAST)
         flagged = contrast > level
         if self.target_error < EDGE_ERROR:
@@ -904,7 +1033,8 @@ class AdaptiveRender:
             # a box of one colour stays at one sample
             flagged |= corner_objects_differ(corner_obj, obj) & (contrast > self.target_error)
             yield
-            flagged |= checker_cells_differ(scene, corner_t, corner_obj)
+            cells = checker_cells_differ(scene, corner_t, corner_obj)
+            flagged |= cells if fp is None else cells & ~fp
         bends = np.array([scene.scatters(o) for o in scene.objects] + [False])
         through = _fold(np.logical_or, [bends[o] for o in _corners(corner_obj) + [obj]])
         if through.any():
@@ -914,12 +1044,26 @@ class AdaptiveRender:
 
     def _run(self):
         w, h = self.width, self.height
+        corners = (w + 1) * (h + 1)
+        # Room for the corner rays and more (a budget of 3 samples per pixel
+        # or more): they are traced first, so that the first pass already
+        # knows where footprint samples go.
+        with_corners = self.max_spp >= 2 and self.budget - w * h >= 2 * corners
+        if with_corners:
+            colour, corner_t, corner_obj = yield from self._draws(self.sampler.corner_pass())
+            self.spent += corners
+            if self.footprint:
+                planes = footprint_planes(self.scene, corner_obj)
+                self.footprint_mask = planes >= 0
+                self.sampler.set_footprint(planes)
+            yield
         sums, obj, rays = yield from self._draws(self.sampler.first_pass((0.5, 0.5)))
         # what a sample of each pixel costs: the rays its centre sample traced
         self._cost = np.maximum(rays, 1).astype(np.float64)
         self.total[...] = sums.total
         self.square[...] = sums.square
-        self.spent = w * h
+        self.spent += w * h
+        self.first_pass_done = True
         self.rounds.append((w * h, w * h))
         if self.max_spp < 2 or self.budget - self.spent < FIRST_ROUND - 1:
             return                                    # no room for anything but the centres
@@ -927,11 +1071,7 @@ class AdaptiveRender:
         # passes, which takes tenths of a second at 1280x720, into steps of
         # its own, so that the viewer's frames go on in between.
         yield
-        corners = (w + 1) * (h + 1)
-        if self.budget - self.spent >= 2 * corners:
-            colour, corner_t, corner_obj = yield from self._draws(self.sampler.corner_pass())
-            self.spent += corners
-            yield
+        if with_corners:
             flagged, contrast = yield from self._flag_steps(sums.mean, obj, colour, corner_t, corner_obj)
             yield
         else:
@@ -940,8 +1080,9 @@ class AdaptiveRender:
             # where the edges may be.
             contrast = colour_contrast(sums.mean)
             flagged = contrast > max(self.target_error, FLAG_CONTRAST)
+        # the contrast the sliver term sees (module docstring, step 2)
         self._contrast = contrast
-        self._own = sliver_error(contrast, 1)
+        self._own = sliver_error(self._contrast, 1)
         self.sampler.set_offsets(self.offsets)
         # Kept per pixel by _upgrade (contiguous, so rounds do not copy
         # strided views of the image): the samples, and whether another
@@ -1014,7 +1155,7 @@ class AdaptiveRender:
 def render_adaptive(renderer, width: int, height: int, samples: int | None = None,
                     target_error: float = DEFAULT_TARGET_ERROR, seed: int = 0,
                     progress: Callable[[int, int], None] | None = None,
-                    max_spp: int | None = None) -> AdaptiveResult:
+                    max_spp: int | None = None, footprint: bool | None = None) -> AdaptiveResult:
     """Render spending at most `samples` (the scene's samples when None)
     rays per pixel on average -- samples x W x H in all, the corner rays
     included -- where a pixel's estimated error is above target_error
@@ -1022,7 +1163,7 @@ def render_adaptive(renderer, width: int, height: int, samples: int | None = Non
     MAX_SPP_FACTOR x samples).  When the budget runs short, the pixels with
     the largest estimated error go first.  The image converges to the same
     box-filtered picture as Renderer.render."""
-    job = AdaptiveRender(renderer, width, height, samples, target_error, seed, max_spp)
+    job = AdaptiveRender(renderer, width, height, samples, target_error, seed, max_spp, footprint=footprint)
     try:
         return job.run(progress)
     finally:

@@ -37,7 +37,7 @@ import time
 import moderngl
 import numpy as np
 
-from .adaptive import AdaptiveRender, AdaptiveSampler
+from .adaptive import AdaptiveRender, AdaptiveSampler, checkered_planes
 from .sampling import sample_offsets
 from .shaders import build_program
 
@@ -70,6 +70,7 @@ class Progressive:
         self._adaptive = bool(adaptive)
         self.job: AdaptiveRender | None = None
         self._uploaded_spent = 0
+        self._uploaded_first = False     # the upload holds the first pass (every pixel has a sample)
         self._uploaded_mean = 0.0
         self._uploaded_draws = 0    # the job's draws_done when accum_tex or the overlay was last updated
         self._overlay = None        # (a round's pixels, its sums texture): what the display adds to accum_tex
@@ -113,7 +114,7 @@ class Progressive:
         """Every pixel of accum_tex has at least one sample."""
         if self._adaptive:
             w, h = self.size
-            return self.job is not None and w * h > 0 and self._uploaded_spent >= w * h
+            return self.job is not None and w * h > 0 and self._uploaded_first
         return self.passes_done > 0
 
     @property
@@ -188,6 +189,7 @@ class Progressive:
 
     def _reset_upload(self) -> None:
         self._uploaded_spent = 0
+        self._uploaded_first = False     # the upload holds the first pass (every pixel has a sample)
         self._uploaded_mean = 0.0
         self._uploaded_draws = 0
         self._overlay = None
@@ -303,7 +305,7 @@ class Progressive:
         budget = (self.target_ms if budget_ms is None else budget_ms) / 1000.0
         t_start = time.perf_counter()
         first = True
-        had_sample = job.spent >= w * h
+        had_sample = job.first_pass_done
         while not job.done:
             left = budget - (time.perf_counter() - t_start)
             # a step is one draw call, sized from the measured cost per
@@ -320,7 +322,7 @@ class Progressive:
             job.step()
             self._step_s = time.perf_counter() - t0
             self._note_cost(self._step_s, job.sampler.last_draw_fragments)
-            if stop_at_first_sample and not had_sample and job.spent >= w * h:
+            if stop_at_first_sample and not had_sample and job.first_pass_done:
                 break
         self._upload()
         if job.done:
@@ -338,7 +340,8 @@ class Progressive:
         warm-up."""
         if 0 in self.size:
             return                 # no image yet: nothing to compile for
-        sampler = AdaptiveSampler(self.renderer, *self.size)
+        sampler = AdaptiveSampler(self.renderer, *self.size,
+                                  footprint=bool(checkered_planes(self.renderer.scene).any()))
         try:
             sampler.compile()
         finally:
@@ -356,6 +359,7 @@ class Progressive:
         if job.spent != self._uploaded_spent:
             self.accum_tex.write(np.ascontiguousarray(job.total[::-1], dtype=np.float32).tobytes())
             self._uploaded_spent = job.spent
+            self._uploaded_first = job.first_pass_done
             # the samples in the pixels' means (the corner rays the adaptive
             # render also traces are in `spent`, not in any pixel)
             self._uploaded_mean = float(job.total[..., 3].mean())
