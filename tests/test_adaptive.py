@@ -1310,3 +1310,28 @@ def _cells_spanned(scene, w, h, i, j) -> tuple[int, int]:
     c = np.floor(p[:, [0, 2]] / CELL)
     n = c.max(axis=0) - c.min(axis=0)
     return int(n[0]), int(n[1])
+
+
+def test_a_checker_taken_exactly_keeps_one_sample(renderer_for):
+    """AMBIENT_CHECKER at 48x27, budget 8: every pixel whose footprint
+    samples take the checker exactly (the first pass's kind) ends with one
+    sample, since nothing else varies there; the render is then nearer a
+    1024-sample uniform render (another seed) than the uniform render of
+    the same budget, by more than 3x in RMSE (measured 7.3x: 9.5e-3
+    against 6.9e-2; what is left is mostly the horizon, where the checker
+    is too fine for the closed form).  With point samples only, those
+    pixels take more (measured 7.1 on average)."""
+    r = renderer_for("ambient-checker", AMBIENT_CHECKER)
+    w, h = 48, 27
+    job = AdaptiveRender(r, w, h, 8, seed=0)
+    try:
+        res = job.run()
+        exact = job.sampler.footprint_kind == A.FOOTPRINT_EXACT
+    finally:
+        job.release()
+    assert 0.3 < exact.mean() and np.array_equal(exact & job.footprint_mask, exact)
+    assert (res.spp[exact] == 1).all()
+    converged = r.render(w, h, 1024, seed=5)
+    assert rmse(res.image, converged) < rmse(r.render(w, h, 8, seed=0), converged) / 3
+    point = render_adaptive(r, w, h, 8, seed=0, footprint=False)
+    assert point.spp[exact].mean() > 2
