@@ -3,9 +3,14 @@
 bookkeeping between passes) timed on its own, after a warm-up render with
 every shader variant compiled (README, "Adaptive anti-aliasing").
 
+With ``--passes``: the first pass and a list pass of 8 samples over the
+pixels whose footprint lies on the checker, with footprint samples and with
+point samples, medians of 10 interleaved runs (after 2 untimed).
+
 Usage (repository root, the project's virtual environment)::
 
     python tools/adaptive_steps.py [SCENE [BUDGET [WxH]]]    # glass-sphere 4 320x180
+    python tools/adaptive_steps.py --passes [SCENE]          # 320x180
 """
 import sys
 import time
@@ -13,12 +18,49 @@ import time
 import moderngl
 
 from viewer import bench
-from viewer.adaptive import AdaptiveRender, AdaptiveSampler
+import numpy as np
+
+from viewer.adaptive import AdaptiveRender, AdaptiveSampler, drain, footprint_planes
 from viewer.renderer import Renderer
 from viewer.scene import load_scene
 
 
+def passes(name: str, w: int = 320, h: int = 180) -> None:
+    from viewer.sampling import progressive_offsets
+
+    ctx = moderngl.create_standalone_context(backend="egl")
+    r = Renderer(ctx, load_scene(name))
+    r.SUBSET_PROGRAMS = 64                   # both kinds of variant stay compiled
+    s = AdaptiveSampler(r, w, h, footprint=True)
+    s.compile()
+    AdaptiveSampler(r, w, h).compile()
+    _, _, corner_obj = drain(s.corner_pass())
+    planes = footprint_planes(r.scene, corner_obj)
+    s.set_offsets(progressive_offsets(16, 0))
+    pixels = np.flatnonzero(planes.ravel() >= 0)
+    ones, eights = np.ones(len(pixels), np.int64), np.full(len(pixels), 8, np.int64)
+    times = {k: [] for k in ("point first", "point list", "footprint first", "footprint list")}
+
+    def timed(fn):
+        t0 = time.perf_counter()
+        fn()
+        return (time.perf_counter() - t0) * 1e3
+    for _ in range(12):
+        for kind, mask in (("point", None), ("footprint", planes)):
+            s.set_footprint(mask)
+            times[f"{kind} first"].append(timed(lambda: drain(s.first_pass())))
+            times[f"{kind} list"].append(timed(lambda: drain(s.add_samples(pixels, ones, eights))))
+    print(f"{name} at {w}x{h}: list passes over {len(pixels)} pixels on the checker, 8 samples each")
+    for k, v in times.items():
+        print(f"  {k}: {np.median(v[2:]):.1f} ms")
+    s.release()
+    r.release()
+
+
 def main(argv: list[str]) -> int:
+    if argv and argv[0] == "--passes":
+        passes(argv[1] if len(argv) > 1 else "glass-sphere")
+        return 0
     name = argv[0] if argv else "glass-sphere"
     budget = int(argv[1]) if len(argv) > 1 else 4
     w, h = (int(v) for v in (argv[2] if len(argv) > 2 else "320x180").split("x"))
