@@ -1023,11 +1023,11 @@ class AdaptiveRender:
             # that only what else varies (a shadow edge, another object)
             # flags them.  (Those that take it along rows only, and those
             # too far for either, are flagged as point-sampled ones.)
-            corner_colour = corner_colour - self.sampler.corner_checker
             centre = np.where(fp[..., None], centre - self.sampler.centre_checker, centre)
-        contrast = corner_contrast(corner_colour, centre)
-        if fp is not None:
-            contrast = np.where(fp, contrast, corner_contrast(corner_colour + self.sampler.corner_checker, centre))
+            contrast = np.where(fp, corner_contrast(corner_colour - self.sampler.corner_checker, centre),
+                                corner_contrast(corner_colour, centre))
+        else:
+            contrast = corner_contrast(corner_colour, centre)
         level = max(self.target_error, FLAG_CONTRAST)
         flagged = contrast > level
         if self.target_error < EDGE_ERROR:
