@@ -235,6 +235,20 @@ def corner_directions(scene, width: int, height: int) -> np.ndarray:
     return d / np.sqrt(_channel_sum(d * d))[..., None]
 
 
+def checker_sizes(scene) -> np.ndarray:
+    """(objects + 1,): the checker size of each object whose checker's two
+    colours (or emissions) differ, inf for the others and for the last
+    entry (the sky's -1)."""
+    size = np.full(len(scene.objects) + 1, np.inf)
+    for k, o in enumerate(scene.objects):
+        m = scene.materials[o.material]
+        c = m.checker
+        if c is not None and (tuple(c.color) != tuple(m.color)
+                              or (c.emission is not None and tuple(c.emission) != tuple(m.emission))):
+            size[k] = c.size
+    return size
+
+
 def checker_cells_differ(scene, t: np.ndarray, obj: np.ndarray) -> np.ndarray:
     """(H, W) bool from the corner rays' first interactions (t, obj: (H + 1,
     W + 1); t = inf, obj = -1 for the sky): all four corners of the pixel
@@ -244,13 +258,7 @@ def checker_cells_differ(scene, t: np.ndarray, obj: np.ndarray) -> np.ndarray:
     each other have the same colour, and a square's corner can poke into
     the pixel between its corners."""
     h, w = t.shape[0] - 1, t.shape[1] - 1
-    size = np.full(len(scene.objects) + 1, np.inf)      # last entry: no hit
-    for k, o in enumerate(scene.objects):
-        m = scene.materials[o.material]
-        c = m.checker
-        if c is not None and (tuple(c.color) != tuple(m.color)
-                              or (c.emission is not None and tuple(c.emission) != tuple(m.emission))):
-            size[k] = c.size
+    size = checker_sizes(scene)
     out = np.zeros((h, w), bool)
     if not np.isfinite(size).any():
         return out
@@ -271,13 +279,15 @@ def checker_cells_differ(scene, t: np.ndarray, obj: np.ndarray) -> np.ndarray:
 def checkered_planes(scene) -> np.ndarray:
     """(objects + 1,) bool: which objects are planes with a checker whose two
     colours differ (the last entry, for the sky's -1, is False)."""
-    out = np.zeros(len(scene.objects) + 1, bool)
-    for k, o in enumerate(scene.objects):
-        m = scene.materials[o.material]
-        c = m.checker
-        out[k] = o.type == "plane" and c is not None and (
-            tuple(c.color) != tuple(m.color) or (c.emission is not None and tuple(c.emission) != tuple(m.emission)))
-    return out
+    planes = np.array([o.type == "plane" for o in scene.objects] + [False])
+    return planes & np.isfinite(checker_sizes(scene))
+
+
+def footprint_default(scene) -> bool:
+    """Whether adaptive renders of `scene` take footprint samples unless
+    told otherwise: where it has a checkered plane and few enough objects
+    for the footprint mask's texels."""
+    return bool(checkered_planes(scene).any()) and len(scene.objects) < MAX_FOOTPRINT_OBJECTS
 
 
 def footprint_planes(scene, corner_obj: np.ndarray) -> np.ndarray:
@@ -898,9 +908,7 @@ class AdaptiveRender:
         # footprint lies on one checkered plane: on by default where the
         # scene has one; a sampler given here says whether it takes them.
         if footprint is None:
-            footprint = (getattr(sampler, "footprint", False) if sampler is not None
-                         else bool(checkered_planes(self.scene).any())
-                         and len(self.scene.objects) < MAX_FOOTPRINT_OBJECTS)
+            footprint = getattr(sampler, "footprint", False) if sampler is not None else footprint_default(self.scene)
         self.footprint = bool(footprint)
         self.sampler = (sampler if sampler is not None
                         else AdaptiveSampler(renderer, width, height, footprint=self.footprint))

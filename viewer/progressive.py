@@ -37,7 +37,7 @@ import time
 import moderngl
 import numpy as np
 
-from .adaptive import AdaptiveRender, AdaptiveSampler, checkered_planes
+from .adaptive import AdaptiveRender, AdaptiveSampler, footprint_default
 from .sampling import sample_offsets
 from .shaders import build_program
 
@@ -340,8 +340,7 @@ class Progressive:
         warm-up."""
         if 0 in self.size:
             return                 # no image yet: nothing to compile for
-        sampler = AdaptiveSampler(self.renderer, *self.size,
-                                  footprint=bool(checkered_planes(self.renderer.scene).any()))
+        sampler = AdaptiveSampler(self.renderer, *self.size, footprint=footprint_default(self.renderer.scene))
         try:
             sampler.compile()
         finally:

@@ -119,16 +119,13 @@ float pixelCoverage(int k) {
     ivec2 n = ok ? ivec2(span) : ivec2(0);          // 0 trips where not needed
     float o00 = mod(lo.x + lo.y, 2.0);               // parity of cell (0, 0); cell (a, b): o00 + a + b
     float f = o00;
-    for (int a = 1; a <= n.x; ++a) {
-        float par = mod(o00 + float(a), 2.0);
-        f += (2.0 * par - 1.0) * halfSquareArea(beyondLine(0, (lo.x + float(a)) * size - off.x, h));
-    }
     for (int b = 1; b <= n.y; ++b) {
         float par = mod(o00 + float(b), 2.0);
         f += (2.0 * par - 1.0) * halfSquareArea(beyondLine(1, (lo.y + float(b)) * size - off.y, h));
     }
     for (int a = 1; a <= n.x; ++a) {
         vec3 la = beyondLine(0, (lo.x + float(a)) * size - off.x, h);
+        f += (2.0 * mod(o00 + float(a), 2.0) - 1.0) * halfSquareArea(la);
         for (int b = 1; b <= n.y; ++b) {
             float par = mod(o00 + float(a + b), 2.0);
             f += (4.0 * par - 2.0) * quarterSquareArea(la, beyondLine(1, (lo.y + float(b)) * size - off.y, h));
