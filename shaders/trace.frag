@@ -45,12 +45,17 @@ uniform int chunkSize;
 #ifdef ADAPTIVE_FIRST
 layout(location = 2) out vec4 fragFirstHit;     // (t, object index, rays, 0); (INF, -1) for the sky
 layout(location = 3) out vec4 fragFirstChecker; // rgb: firstChecker (exposure applied); a: footprint kind
+layout(location = 4) out vec4 fragChainLeaf;    // chainLeaf
 #endif
 #endif
 #ifdef ADAPTIVE_FIRST
 float firstT = INF;
 int firstObject = -1;
 vec3 firstChecker = vec3(0.0);
+// Where the camera ray's principal chain (see Branch) ends on an opaque
+// surface: (x, z camera-relative, chain id, object); object -1: it leaves
+// the scene or is cut (max_depth, min_weight) first.
+vec4 chainLeaf = vec4(0.0, 0.0, 0.0, -1.0);
 #define RECORD_FIRST(br, it) if (br.depth == 1) { firstT = length(it.p - br.o); firstObject = it.object; }
 #else
 #define RECORD_FIRST(br, it)
@@ -378,7 +383,27 @@ vec3 lightAt(Material m, vec3 p, vec3 n, vec3 v, uint mask) {
 
 // ---------------------------------------------------------------- the ray tree
 
-struct Branch { vec3 o; vec3 d; vec3 w; int depth; uint mask; };
+// chain: the id of the principal chain a branch is on, -1 off it.  The
+// camera ray is on the empty chain (0); at a crossing the refracted child
+// continues it (the reflected one where the refracted has no weight: total
+// internal reflection); every other child is off it.  The id hashes the
+// crossings' objects and faces (chainStep), so rays through the same
+// surfaces share it; footprint samples (lib/footprint.glsl) and the corner
+// rays' chainLeaf use it.
+struct Branch { vec3 o; vec3 d; vec3 w; int depth; uint mask; float chain; };
+
+// The id after a crossing of `object` through the face of outward normal n
+// (its largest axis and sign), refracted or reflected: a 24-bit hash, held
+// exactly by a float, never 0.
+float chainStep(float chain, int object, vec3 n, bool reflected) {
+    if (chain < 0.0) return -1.0;
+    vec3 a = abs(n);
+    int axis = a.x >= a.y && a.x >= a.z ? 0 : (a.y >= a.z ? 1 : 2);
+    int face = 2 * axis + (n[axis] < 0.0 ? 1 : 0);
+    uint code = uint(object) * 16u + uint(face) * 2u + (reflected ? 1u : 0u) + 1u;
+    uint h = (uint(chain) * 1031u + code) & 0xFFFFFFu;
+    return float(h == 0u ? 1u : h);
+}
 
 // A child is followed when its weight reaches min_weight (and is not zero).
 bool worthFollowing(vec3 w, float minWeight) {
@@ -389,7 +414,7 @@ bool worthFollowing(vec3 w, float minWeight) {
 // and returns its children, the reflected and the refracted branch (weight
 // zero where there is none).
 void walkNode(Branch br, inout vec3 sum, out Branch reflected, out Branch refracted) {
-    reflected = Branch(vec3(0.0), vec3(0.0), vec3(0.0), 0, 0u);
+    reflected = Branch(vec3(0.0), vec3(0.0), vec3(0.0), 0, 0u, -1.0);
     refracted = reflected;
     uint mask = br.mask;
     vec3 atten = vec3(1.0);
@@ -403,19 +428,23 @@ void walkNode(Branch br, inout vec3 sum, out Branch reflected, out Branch refrac
     vec3 n = dot(it.n, br.d) < 0.0 ? it.n : -it.n;     // facing the ray
     Surface s = surfaceAt(m, it.p);
 #ifdef FOOTPRINT_AA
-    // a camera ray on the checkered plane its pixel's footprint lies on:
-    // the checker's colours mixed by their share of the pixel
-    if (br.depth == 1 && it.object == footprintObject && footprintShare >= 0.0)
+    // a ray of the principal chain on the checkered plane its pixel's
+    // footprint lies on: the checker's colours mixed by their share of the
+    // pixel
+    if (takesFootprint(it.object, br.chain, it.p))
         s = Surface(mix(m.colorAmbient.rgb, m.checkerColor.rgb, footprintShare),
                     mix(m.emission.rgb, m.checkerEmission.rgb, footprintShare));
 #endif
     vec3 lit = lightAt(m, it.p, n, -br.d, mask);
     sum += w * (s.emission + s.color * lit);
 #ifdef ADAPTIVE_FIRST
-    // what the checker's second colour adds to the camera ray's radiance
-    // (0 off it): the adaptive flags take it out where footprint samples
-    // take the checker exactly
-    if (br.depth == 1) firstChecker = w * ((s.emission - m.emission.rgb) + (s.color - m.colorAmbient.rgb) * lit);
+    // what the checker's second colour adds to the radiance where the
+    // principal chain ends (0 off a checker): the adaptive flags take it
+    // out where footprint samples take the checker exactly
+    if (br.chain >= 0.0 && !it.dielectric) {
+        firstChecker = w * ((s.emission - m.emission.rgb) + (s.color - m.colorAmbient.rgb) * lit);
+        chainLeaf = vec4(it.p.xz, br.chain, float(it.object));
+    }
 #endif
     if (br.depth >= iparams.x) return;                  // children would exceed max_depth
 #ifdef HAS_DIELECTRIC
@@ -425,14 +454,16 @@ void walkNode(Branch br, inout vec3 sum, out Branch reflected, out Branch refrac
         float cosI = -dot(br.d, n);
         float cosT;
         float R = fresnelDielectric(cosI, n1, n2, cosT);
+        bool tir = R >= 1.0 || m.dielectric.x <= 0.0;
         refracted = Branch(it.p, refractDir(br.d, n, n1 / n2, cosI, cosT), w * ((1.0 - R) * m.dielectric.x),
-                           br.depth + 1, it.maskAfter);
-        reflected = Branch(it.p, reflect(br.d, n), w * R, br.depth + 1, mask);
+                           br.depth + 1, it.maskAfter, tir ? -1.0 : chainStep(br.chain, it.object, it.n, false));
+        reflected = Branch(it.p, reflect(br.d, n), w * R, br.depth + 1, mask,
+                           tir ? chainStep(br.chain, it.object, it.n, true) : -1.0);
         return;
     }
 #endif
 #ifdef HAS_REFLECTION
-    reflected = Branch(it.p, reflect(br.d, n), w * m.phong.w, br.depth + 1, mask);
+    reflected = Branch(it.p, reflect(br.d, n), w * m.phong.w, br.depth + 1, mask, -1.0);
 #endif
 }
 
@@ -448,7 +479,7 @@ vec3 radiance(vec3 origin, vec3 dir) {
 #endif
     float minWeight = params.z;
     vec3 sum = vec3(0.0);
-    Branch br = Branch(origin, dir, vec3(1.0), 1, uint(iparams.y));
+    Branch br = Branch(origin, dir, vec3(1.0), 1, uint(iparams.y), 0.0);
     for (bool walking = true; walking; ) {
         Branch reflected, refracted;
         walkNode(br, sum, reflected, refracted);
@@ -544,6 +575,7 @@ void main() {
     float kind = 0.0;
 #endif
     fragFirstChecker = vec4(firstChecker * params.w, kind);
+    fragChainLeaf = chainLeaf;
 #endif
 #endif
 #endif  // ADAPTIVE_LIST

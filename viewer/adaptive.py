@@ -47,7 +47,13 @@ picture inside glass); a flat region is exact with one centred sample.  So:
    Where too many checker lines cross the pixel for the closed form, each
    sample takes the checker's exact average along its row of the pixel,
    and the pixel is flagged as a point-sampled one; nearer the horizon,
-   point samples.  On by default where the scene has a checkered plane
+   point samples.  Chain footprints do the same for the checker seen through
+   glass: where the four corner rays' principal chains (the refracted
+   branch at every crossing) cross the same surfaces and end on one
+   checkered plane, the homography through the four points they reach
+   stands in for the map from the pixel's square to the plane, where it
+   predicts the neighbouring corners within CHAIN_TOLERANCE
+   (chain_footprints).  On by default where the scene has a checkered plane
    (footprint=False: point samples only).  The corner rays are traced
    before the first pass, which then already takes footprint samples.
 4. The budget is samples x W x H rays in all (the corner rays included),
@@ -304,6 +310,110 @@ def footprint_planes(scene, corner_obj: np.ndarray) -> np.ndarray:
     return np.where((hi == lo) & checkered_planes(scene)[np.where(lo >= 0, lo, -1)], lo, -1)
 
 
+#: Chain footprints (chain_footprints): a pixel's homography through its
+#: four corners' points must predict its eight neighbouring corners within
+#: 4 x this share of its footprint's size (its square's side on the plane),
+#: i.e. (a smooth map's error inside the square being about a quarter of
+#: its error one pixel out) put every point of the square within this share
+#: of where the map puts it: a share of the pixel's area and so of its
+#: colour.  A sample of the pixel whose own point is further off takes a
+#: point sample.
+CHAIN_TOLERANCE = 0.02
+
+
+def square_homography(p: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) rows (X, Z, W) of the homography taking the unit square's
+    corners (u, v) = (0, 0), (1, 0), (0, 1), (1, 1) to the points p (..., 4,
+    2) in that order (_corners' order: top-left, top-right, bottom-left,
+    bottom-right): x = X . w / W . w, z = Z . w / W . w, w = (u, v, 1), W =
+    (g, h, 1) (Heckbert's square-to-quad map).  NaN where the four points
+    are degenerate."""
+    p0, p1, p3, p2 = p[..., 0, :], p[..., 1, :], p[..., 2, :], p[..., 3, :]   # around the square
+    sig = p0 - p1 + p2 - p3
+    d1, d2 = p1 - p2, p3 - p2
+
+    def det(a, b):
+        return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+
+    with np.errstate(divide="ignore", invalid="ignore"):
+        den = det(d1, d2)
+        g = det(sig, d2) / den
+        h = det(d1, sig) / den
+    out = np.empty(p.shape[:-2] + (3, 3))
+    for row, axis in ((0, 0), (1, 1)):
+        out[..., row, 0] = p1[..., axis] - p0[..., axis] + g * p1[..., axis]
+        out[..., row, 1] = p3[..., axis] - p0[..., axis] + h * p3[..., axis]
+        out[..., row, 2] = p0[..., axis]
+    out[..., 2, 0], out[..., 2, 1], out[..., 2, 2] = g, h, 1.0
+    return out
+
+
+def apply_homography(m: np.ndarray, u, v) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(x, z, W . w) of square point (u, v) under rows m (..., 3, 3)."""
+    w = m[..., 2, 0] * u + m[..., 2, 1] * v + m[..., 2, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        x = (m[..., 0, 0] * u + m[..., 0, 1] * v + m[..., 0, 2]) / w
+        z = (m[..., 1, 0] * u + m[..., 1, 1] * v + m[..., 1, 2]) / w
+    return x, z, w
+
+
+def chain_footprints(scene, chain: np.ndarray, planes: np.ndarray | None = None) -> np.ndarray:
+    """(H, W, 12) float32 texels of the chain footprints (footprint.glsl):
+    per pixel (X, id, Z, k + 1, W, tolerance^2), zero where there is none.
+
+    chain (H + 1, W + 1, 4): each corner ray's chainLeaf (x, z camera-
+    relative, chain id, object; object -1: none).  A pixel has a chain
+    footprint where its four corners end their principal chain on one
+    checkered plane k along one chain other than the camera ray itself (id
+    0: footprint_planes' kind, and so are the pixels planes marks), the
+    homography through their points keeps W > 0 over the square, and it
+    predicts the eight neighbouring corners (on the same chain) within
+    4 x CHAIN_TOLERANCE of the square's side on the plane."""
+    hh, ww = chain.shape[0] - 1, chain.shape[1] - 1
+    out = np.zeros((hh, ww, 12), np.float32)
+    if hh < 3 or ww < 3:
+        return out
+    obj = np.rint(chain[..., 3]).astype(np.int64)
+    ident = chain[..., 2]
+    four_obj, four_id = _corners(obj), _corners(ident)
+    ok = checkered_planes(scene)[np.where(obj >= 0, obj, -1)]
+    ok = _fold(np.logical_and, _corners(ok))
+    ok &= (four_id[0] != 0) & _fold(np.logical_and, [(o == four_obj[0]) & (c == four_id[0])
+                                                     for o, c in zip(four_obj[1:], four_id[1:])])
+    if planes is not None:
+        ok &= planes < 0
+    # the image's border pixels have no neighbouring corners on every side
+    ok[0], ok[-1], ok[:, 0], ok[:, -1] = False, False, False, False
+    if not ok.any():
+        return out
+    jj, ii = np.nonzero(ok)
+    pts = chain[..., :2].astype(np.float64)
+    quad = np.stack([pts[jj, ii], pts[jj, ii + 1], pts[jj + 1, ii], pts[jj + 1, ii + 1]], axis=1)
+    m = square_homography(quad)
+    good = np.isfinite(m).all(axis=(1, 2))
+    for u, v in ((0, 0), (1, 0), (0, 1), (1, 1)):
+        good &= apply_homography(m, u, v)[2] > 0.0
+    # the side of the square on the plane: sqrt of the quad's area
+    d = quad[:, 3] - quad[:, 0], quad[:, 2] - quad[:, 1]
+    side = np.sqrt(0.5 * np.abs(d[0][:, 0] * d[1][:, 1] - d[0][:, 1] * d[1][:, 0]))
+    worst = np.zeros(len(jj))
+    k, c = obj[jj, ii], ident[jj, ii]
+    for du, dv in ((-1, 0), (-1, 1), (2, 0), (2, 1), (0, -1), (1, -1), (0, 2), (1, 2)):
+        r, q = jj + dv, ii + du
+        good &= (obj[r, q] == k) & (ident[r, q] == c)
+        x, z, w = apply_homography(m, float(du), float(dv))
+        good &= w > 0.0
+        with np.errstate(invalid="ignore"):
+            worst = np.maximum(worst, np.hypot(x - pts[r, q, 0], z - pts[r, q, 1]))
+    tol = CHAIN_TOLERANCE * side
+    good &= np.isfinite(worst) & (worst <= 8.0 * tol) & (side > 0.0)
+    jj, ii, m, k, c, tol = jj[good], ii[good], m[good], k[good], c[good], tol[good]
+    out[jj, ii, 0:3], out[jj, ii, 3] = m[:, 0], c
+    out[jj, ii, 4:7], out[jj, ii, 7] = m[:, 1], k + 1
+    out[jj, ii, 8:11], out[jj, ii, 11] = m[:, 2], tol * tol
+    return out
+
+
 class Sums(NamedTuple):
     """Per-pixel sums over a pixel's samples 0..n-1, top row first: total
     (H, W, 4) = sum (L, 1); square (H, W) = sum L.L."""
@@ -554,8 +664,9 @@ class AdaptiveSampler:
     #: the first and list passes' defines with footprint samples (trace.frag)
     FOOTPRINT_FIRST = {**FIRST, "FOOTPRINT_AA": 1}
     FOOTPRINT_LIST = {**LIST, "FOOTPRINT_AA": 1}
-    #: the texture unit of the footprint mask
+    #: the texture units of the footprint mask and of the chain footprints
     FOOTPRINT_UNIT = 3
+    FOOTPRINT_CHAIN_UNIT = 4
 
     def __init__(self, renderer, width: int, height: int, footprint: bool = False):
         self.renderer = renderer
@@ -563,6 +674,7 @@ class AdaptiveSampler:
         #: are the ones compile() makes)
         self.footprint = bool(footprint)
         self._footprint_tex = None           # the mask set_footprint gave (None: point samples)
+        self._chain_tex = None               # its chain footprints (zeros: none)
         self.ctx: moderngl.Context = renderer.ctx
         self.width, self.height = width, height
         self._list_tex = None
@@ -584,6 +696,9 @@ class AdaptiveSampler:
         #: (H, W) int8 from the latest first pass: how each pixel's footprint
         #: samples take the checker (FOOTPRINT_EXACT, FOOTPRINT_ROWS or 0: not)
         self.footprint_kind = None
+        #: (H + 1, W + 1, 4) from the latest corner pass: each corner ray's
+        #: chainLeaf (trace.frag; chain_footprints)
+        self.corner_chain = None
 
     def _programs(self, defines: dict) -> list[tuple[moderngl.Program, tuple]]:
         """The renderer's (program, rectangles) pairs of these variant
@@ -606,14 +721,17 @@ class AdaptiveSampler:
     def list_defines(self) -> dict:
         return self.FOOTPRINT_LIST if self._footprint_tex is not None else self.LIST
 
-    def set_footprint(self, planes: np.ndarray | None) -> None:
+    def set_footprint(self, planes: np.ndarray | None, chain: np.ndarray | None = None) -> None:
         """Footprint samples (shaders/lib/footprint.glsl) from now on: on the
         plane `planes` gives for each pixel ((H, W) object index, -1: point
-        samples; top row first; see footprint_planes), or point samples
-        everywhere (None)."""
-        if self._footprint_tex is not None:
-            self._footprint_tex.release()
-            self._footprint_tex = None
+        samples; top row first; see footprint_planes) and, where it gives
+        none, through the chain footprints `chain` ((H, W, 12) texels of
+        chain_footprints; None: none), or point samples everywhere (planes
+        None)."""
+        for tex in (self._footprint_tex, self._chain_tex):
+            if tex is not None:
+                tex.release()
+        self._footprint_tex = self._chain_tex = None
         if planes is None:
             return
         if not self.footprint:
@@ -624,11 +742,20 @@ class AdaptiveSampler:
         data = np.ascontiguousarray((planes[::-1] + 1).astype(np.uint8))
         self._footprint_tex = self.ctx.texture((self.width, self.height), 1, data.tobytes())
         self._footprint_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        if chain is None:
+            chain = np.zeros((self.height, self.width, 12), np.float32)
+        # texels (3i + r, H - 1 - j): rows bottom first, three RGBA per pixel
+        data = np.ascontiguousarray(chain[::-1].astype(np.float32))
+        self._chain_tex = self.ctx.texture((3 * self.width, self.height), 4, data.tobytes(), dtype="f4")
+        self._chain_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
 
     def _bind_footprint(self, prog) -> None:
         if self._footprint_tex is not None and "footprintMask" in prog:
             self._footprint_tex.use(location=self.FOOTPRINT_UNIT)
             prog["footprintMask"].value = self.FOOTPRINT_UNIT
+            if "footprintChain" in prog:
+                self._chain_tex.use(location=self.FOOTPRINT_CHAIN_UNIT)
+                prog["footprintChain"].value = self.FOOTPRINT_CHAIN_UNIT
 
     def group_labels(self, programs) -> np.ndarray:
         """(H, W) int8, top row first: which of `programs`' groups of
@@ -645,13 +772,14 @@ class AdaptiveSampler:
         return self._labels
 
     def _mrt_target(self, size) -> moderngl.Framebuffer:
-        """Four RGBA32F targets of `size` for the ADAPTIVE_FIRST variants
-        (sums, square, first interaction, the checker's part), kept for the
+        """Five RGBA32F targets of `size` for the ADAPTIVE_FIRST variants
+        (sums, square, first interaction, the checker's part, the chain
+        leaf), kept for the
         sampler's life: at 1280x720 making them costs as much as a sample of
         the sky."""
         fbo = self._mrt.get(size)
         if fbo is None:
-            texs = [self.ctx.texture(size, 4, dtype="f4") for _ in range(4)]
+            texs = [self.ctx.texture(size, 4, dtype="f4") for _ in range(5)]
             fbo = self._mrt[size] = self.ctx.framebuffer(color_attachments=texs)
         return fbo
 
@@ -686,9 +814,9 @@ class AdaptiveSampler:
                 top += rows
                 yield
             # only the channels the attachments use: (sum L, 1), L.L, (t, object, rays),
-            # (checker part, footprint kind)
+            # (checker part, footprint kind), chain leaf
             return [np.frombuffer(fbo.read(attachment=k, components=c, dtype="f4"), np.float32)
-                    .reshape(h, w, c)[::-1] for k, c in enumerate((4, 1, 3, 4))]
+                    .reshape(h, w, c)[::-1] for k, c in enumerate((4, 1, 3, 4, 4))]
         finally:
             ctx.scissor = None
 
@@ -725,6 +853,7 @@ class AdaptiveSampler:
         full = [(self.renderer.variant(**self.FIRST), ((0, 0, self.width + 1, self.height + 1),))]
         out = yield from self._mrt_pass((self.width + 1, self.height + 1), lambda: full, (0.0, 1.0))
         self.corner_checker = np.ascontiguousarray(out[3][..., :3], np.float64)
+        self.corner_chain = np.ascontiguousarray(out[4], np.float64)
         t, obj = self._first_hits(out[2])
         return np.ascontiguousarray(out[0][..., :3], np.float64), t, obj
 
@@ -1064,8 +1193,12 @@ class AdaptiveRender:
             self.spent += corners
             if self.footprint:
                 planes = footprint_planes(self.scene, corner_obj)
+                chain = getattr(self.sampler, "corner_chain", None)
+                chain = None if chain is None else chain_footprints(self.scene, chain, planes)
                 self.footprint_mask = planes >= 0
-                self.sampler.set_footprint(planes)
+                if chain is not None:
+                    self.footprint_mask |= chain[..., 7] > 0
+                self.sampler.set_footprint(planes, chain)
             yield
         sums, obj, rays = yield from self._draws(self.sampler.first_pass((0.5, 0.5)))
         # what a sample of each pixel costs: the rays its centre sample traced

@@ -17,16 +17,37 @@
 // straight line in (u, v), and the share of the square beyond it has a
 // closed form.
 //
+// Chain footprints: where the four corner rays do not meet a plane first
+// but follow one principal chain (the refracted branch at every crossing,
+// the reflected one at total internal reflection) through the same
+// surfaces to one checkered plane, the map from the pixel's square to the
+// plane is taken as the homography through the four corners' points
+// (viewer/adaptive.py's chain_footprints, which also rejects pixels where
+// the corner grid bends more than CHAIN_TOLERANCE allows).  A sample whose
+// own principal chain matches and lands within that tolerance of where the
+// homography puts it takes the shares; any other takes a point sample.
+//
+// Both kinds reach the closed form as three rows: plane coordinate x (z) =
+// (fpX . w) / (fpW . w) ((fpZ . w) / (fpW . w)), w = (u, v, 1), camera-relative,
+// with fpW . w > 0 over the square.
+//
 // Cost: the shares are computed once per pixel (setFootprintPixel) and
 // once per sample only where the closed form is out of reach (the row
 // fallback).  On a SIMD rasteriser every lane runs every branch, so each
 // loop's trip count is 0 in the lanes that do not need it.
 
 uniform sampler2D footprintMask;
+// Texels (3i + r, H - 1 - j), r = 0, 1, 2, of pixel (i, j): (fpX, chain),
+// (fpZ, k + 1), (fpW, tolerance^2) of its chain footprint (k + 1 = 0: none).
+uniform sampler2D footprintChain;
 int footprintObject = -1;     // k, or -1: this pixel takes point samples
+float footprintChainId = 0.0; // the principal chain its samples must follow (0: the camera ray itself)
 float pixelShare = -1.0;      // the closed form's share (-1: none)
 float footprintShare = -1.0;  // this sample's share (-1: a point sample)
 vec3 pixD00, pixEu, pixEv;
+vec3 fpX, fpZ, fpW;           // the rows (see above)
+float fpTol2 = INF;           // a chain sample's largest squared distance from the homography's point
+vec2 fpOffset;                // this sample's (u, v)
 
 // More products of crossing lines than this (checker corners inside the
 // pixel), or more lines: no closed form; the sample's row is integrated.
@@ -83,17 +104,21 @@ float quarterSquareArea(vec3 l1, vec3 l2) {
 }
 #undef CLIP_BY
 
-// The half-plane of (u, v) where world coordinate `axis` (0: x, 1: z) on the
-// plane y = h exceeds b (both camera-relative).
-vec3 beyondLine(int axis, float b, float h) {
-    float q = b / h;
-    return axis == 0 ? vec3(pixEu.x - q * pixEu.y, pixEv.x - q * pixEv.y, pixD00.x - q * pixD00.y)
-                     : vec3(pixEu.z - q * pixEu.y, pixEv.z - q * pixEv.y, pixD00.z - q * pixD00.y);
+// The half-plane of (u, v) where plane coordinate `axis` (0: x, 1: z)
+// exceeds b (camera-relative): (row - b fpW) . w > 0, as fpW . w > 0.
+vec3 beyondLine(int axis, float b) {
+    return (axis == 0 ? fpX : fpZ) - b * fpW;
 }
 
-// The checker cell (x, z) that the camera ray d meets on the plane y = h.
-vec2 cellOf(vec3 d, float h, vec2 off, float size) {
-    return floor((h * d.xz / d.y + off) / size);
+// The plane point (x, z) of (u, v) in the square.
+vec2 planePoint(vec2 uv) {
+    vec3 w = vec3(uv, 1.0);
+    return vec2(dot(fpX, w), dot(fpZ, w)) / dot(fpW, w);
+}
+
+// The checker cell (x, z) of (u, v).
+vec2 cellOf(vec2 uv, vec2 off, float size) {
+    return floor((planePoint(uv) + off) / size);
 }
 
 // The share of the pixel's square on the checker's second colour (where
@@ -108,11 +133,10 @@ vec2 cellOf(vec3 d, float h, vec2 off, float size) {
 float pixelCoverage(int k) {
     Object o = objects[max(k, 0)];
     Material m = materials[o.info.y];
-    float h = o.a.x, size = m.dielectric.w;
+    float size = m.dielectric.w;
     vec2 off = m.checkerOffset.xy;
-    vec3 d01 = pixD00 + pixEu, d10 = pixD00 + pixEv, d11 = d01 + pixEv;
-    vec2 c00 = cellOf(pixD00, h, off, size), c01 = cellOf(d01, h, off, size);
-    vec2 c10 = cellOf(d10, h, off, size), c11 = cellOf(d11, h, off, size);
+    vec2 c00 = cellOf(vec2(0.0), off, size), c01 = cellOf(vec2(1.0, 0.0), off, size);
+    vec2 c10 = cellOf(vec2(0.0, 1.0), off, size), c11 = cellOf(vec2(1.0), off, size);
     vec2 lo = min(min(c00, c01), min(c10, c11)), hi = max(max(c00, c01), max(c10, c11));
     vec2 span = hi - lo;
     bool ok = k >= 0 && span.x * span.y <= float(MAX_PIXEL_CORNERS) && span.x + span.y <= float(MAX_PIXEL_LINES);
@@ -121,24 +145,24 @@ float pixelCoverage(int k) {
     float f = o00;
     for (int b = 1; b <= n.y; ++b) {
         float par = mod(o00 + float(b), 2.0);
-        f += (2.0 * par - 1.0) * halfSquareArea(beyondLine(1, (lo.y + float(b)) * size - off.y, h));
+        f += (2.0 * par - 1.0) * halfSquareArea(beyondLine(1, (lo.y + float(b)) * size - off.y));
     }
     for (int a = 1; a <= n.x; ++a) {
-        vec3 la = beyondLine(0, (lo.x + float(a)) * size - off.x, h);
+        vec3 la = beyondLine(0, (lo.x + float(a)) * size - off.x);
         f += (2.0 * mod(o00 + float(a), 2.0) - 1.0) * halfSquareArea(la);
         for (int b = 1; b <= n.y; ++b) {
             float par = mod(o00 + float(a + b), 2.0);
-            f += (4.0 * par - 2.0) * quarterSquareArea(la, beyondLine(1, (lo.y + float(b)) * size - off.y, h));
+            f += (4.0 * par - 2.0) * quarterSquareArea(la, beyondLine(1, (lo.y + float(b)) * size - off.y));
         }
     }
     return ok ? clamp(f, 0.0, 1.0) : -1.0;
 }
 
-// Where along the row at v (u) world coordinate `axis` of the point on the
-// plane y = h equals b: h (D0a + u Ea) / (D0y + u Ey) = b.
-float rowCrossing(vec3 d0, int axis, float b, float h) {
-    float a0 = axis == 0 ? d0.x : d0.z, e = axis == 0 ? pixEu.x : pixEu.z;
-    return (b * d0.y - h * a0) / (h * e - b * pixEu.y);
+// Where along the row at v (u) plane coordinate `axis` equals b: the line
+// (row - b fpW) . (u, v, 1) = 0.
+float rowCrossing(float v, int axis, float b) {
+    vec3 l = beyondLine(axis, b);
+    return -(l.y * v + l.z) / l.x;
 }
 
 // The share of the pixel's row at v, u in [0, 1), on the checker's second
@@ -149,10 +173,9 @@ float rowCrossing(vec3 d0, int axis, float b, float h) {
 float rowCoverage(int k, float v, bool need) {
     Object o = objects[max(k, 0)];
     Material m = materials[o.info.y];
-    float h = o.a.x, size = m.dielectric.w;
+    float size = m.dielectric.w;
     vec2 off = m.checkerOffset.xy;
-    vec3 d0 = pixD00 + v * pixEv;
-    vec2 c0 = cellOf(d0, h, off, size), c1 = cellOf(d0 + pixEu, h, off, size);
+    vec2 c0 = cellOf(vec2(0.0, v), off, size), c1 = cellOf(vec2(1.0, v), off, size);
     vec2 dir = sign(c1 - c0);
     bool ok = need && k >= 0 && abs(c1.x - c0.x) + abs(c1.y - c0.y) <= float(MAX_ROW_CROSSINGS);
     ivec2 nc = ok ? ivec2(abs(c1 - c0)) : ivec2(0);   // 0 trips where not needed
@@ -162,8 +185,8 @@ float rowCoverage(int k, float v, bool need) {
     float par = mod(c0.x + c0.y, 2.0), acc = 0.0, u = 0.0;
     int kx = 0, kz = 0;
     for (int s = 0; s < nc.x + nc.y; ++s) {
-        float ux = kx < nc.x ? rowCrossing(d0, 0, first.x + float(kx) * dir.x * size, h) : 2.0;
-        float uz = kz < nc.y ? rowCrossing(d0, 1, first.y + float(kz) * dir.y * size, h) : 2.0;
+        float ux = kx < nc.x ? rowCrossing(v, 0, first.x + float(kx) * dir.x * size) : 2.0;
+        float uz = kz < nc.y ? rowCrossing(v, 1, first.y + float(kz) * dir.y * size) : 2.0;
         float next = clamp(min(ux, uz), u, 1.0);
         acc += par * (next - u);
         u = next;
@@ -173,19 +196,48 @@ float rowCoverage(int k, float v, bool need) {
     return ok ? acc + par * (1.0 - u) : -1.0;
 }
 
-// Once per pixel (i, j): its plane, its square's rays and the closed form.
+// Once per pixel (i, j): its plane, its square's rows and the closed form.
 void setFootprintPixel(vec2 ij) {
-    float code = texelFetch(footprintMask, ivec2(ij.x, imageSize.y - 1.0 - ij.y), 0).r;
+    int row = int(imageSize.y - 1.0 - ij.y);
+    float code = texelFetch(footprintMask, ivec2(ij.x, row), 0).r;
     footprintObject = int(code * 255.0 + 0.5) - 1;
+    footprintChainId = 0.0;
+    fpTol2 = INF;
     vec2 uv0 = ij / imageSize;
     pixD00 = camForward + (2.0 * uv0.x - 1.0) * camRight + (1.0 - 2.0 * uv0.y) * camUp;
     pixEu = (2.0 / imageSize.x) * camRight;
     pixEv = (-2.0 / imageSize.y) * camUp;
+    // the camera ray D = pixD00 + u pixEu + v pixEv meets the plane y = h
+    // at t = h / D.y > 0: x = h D.x / D.y, z = h D.z / D.y
+    float h = objects[max(footprintObject, 0)].a.x;
+    fpX = vec3(pixEu.x, pixEv.x, pixD00.x);
+    fpZ = vec3(pixEu.z, pixEv.z, pixD00.z);
+    fpW = vec3(pixEu.y, pixEv.y, pixD00.y) / h;
+    if (footprintObject < 0) {
+        vec4 t0 = texelFetch(footprintChain, ivec2(3 * int(ij.x), row), 0);
+        vec4 t1 = texelFetch(footprintChain, ivec2(3 * int(ij.x) + 1, row), 0);
+        vec4 t2 = texelFetch(footprintChain, ivec2(3 * int(ij.x) + 2, row), 0);
+        footprintObject = int(t1.w + 0.5) - 1;
+        footprintChainId = t0.w;
+        fpX = t0.xyz; fpZ = t1.xyz; fpW = t2.xyz;
+        fpTol2 = t2.w;
+    }
     pixelShare = pixelCoverage(footprintObject);
 }
 
 // Once per sample at `offset`: the share its camera ray takes on the plane.
 void setFootprintSample(vec2 offset) {
+    fpOffset = offset;
     float row = rowCoverage(footprintObject, offset.y, footprintObject >= 0 && pixelShare < 0.0);
     footprintShare = pixelShare >= 0.0 ? pixelShare : row;
+}
+
+// Whether a ray of this sample that met plane k at p (camera-relative)
+// along principal chain `chain` takes the footprint's share: the pixel's
+// plane and chain, and (a chain footprint) within the tolerance of where
+// the homography puts the sample.
+bool takesFootprint(int k, float chain, vec3 p) {
+    if (k != footprintObject || chain != footprintChainId || footprintShare < 0.0) return false;
+    vec2 e = p.xz - planePoint(fpOffset);
+    return chain == 0.0 || dot(e, e) <= fpTol2;
 }
