@@ -53,7 +53,9 @@ picture inside glass); a flat region is exact with one centred sample.  So:
    checkered plane, the homography through the four points they reach
    stands in for the map from the pixel's square to the plane, where it
    predicts the neighbouring corners within CHAIN_TOLERANCE
-   (chain_footprints).  On by default where the scene has a checkered plane
+   (chain_footprints); such a pixel is flagged on its five rays' colours
+   as they are (what else varies through glass can be far smaller than a
+   pixel: a highlight).  On by default where the scene has a checkered plane
    (footprint=False: point samples only).  The corner rays are traced
    before the first pass, which then already takes footprint samples.
 4. The budget is samples x W x H rays in all (the corner rays included),
@@ -709,8 +711,9 @@ class AdaptiveSampler:
         self.last_draw_fragments = 0     # pixel-samples the latest draw traced
         self._in_flight = None           # (list framebuffer, texel of each entry) during add_samples
         #: what the checker's second colour adds to the colours the latest
-        #: first pass ((H, W, 3)) and corner pass ((H + 1, W + 1, 3)) gave
-        #: (0 off a checker; exposure applied)
+        #: first pass ((H, W, 3)) and corner pass ((H + 1, W + 1, 3)) gave,
+        #: where each camera ray's principal chain ends (0 off a checker;
+        #: exposure applied)
         self.centre_checker = self.corner_checker = None
         #: (H, W) int8 from the latest first pass: how each pixel's footprint
         #: samples take the checker (FOOTPRINT_EXACT, FOOTPRINT_ROWS or 0: not)
@@ -1175,41 +1178,44 @@ class AdaptiveRender:
         0.1 s of numpy at 1280x720: the viewer draws a frame in between)."""
         scene = self.scene
         fp = None if self.footprint_mask is None else self.sampler.footprint_kind == FOOTPRINT_EXACT
-        if fp is not None and self.chain_mask is not None:
-            fp &= ~self.chain_mask
+        chain = None if fp is None or self.chain_mask is None else fp & self.chain_mask
         if fp is not None:
-            # Pixels whose footprint samples take the directly seen checker
-            # exactly: their five rays are compared with the checker's part
-            # taken out, so that only what else varies (a shadow edge,
-            # another object) flags them.  (Those that take it along rows
-            # only, and those too far for either, are flagged as
-            # point-sampled ones.)  Chain footprints are flagged on their
-            # colours as they are: what else varies there can be far
-            # smaller than a pixel (the glass's own highlight, an object in
-            # a minified refracted picture), and took 1 sample where it
-            # had taken 256 with the checker's contrast flagging the pixel
-            # (bench-many, a glass sphere's highlight: errors of 0.05-0.11);
-            # their samples agree when nothing else varies, so such a
-            # pixel stops at FIRST_ROUND.
+            # Pixels whose footprint samples take the checker exactly: their
+            # five rays are compared with the checker's part taken out, so
+            # that only what else varies (a shadow edge, another object)
+            # counts.  (Those that take it along rows only, and those too far
+            # for either, count as point-sampled ones.)  That is the contrast
+            # returned, which the sliver term sees.  But chain footprints are
+            # flagged on their colours as they are: what else varies there
+            # can be far smaller than a pixel (the glass's own highlight, an
+            # object in a minified refracted picture), and took 1 sample
+            # where it had taken 256 with the checker's contrast flagging the
+            # pixel (bench-many, a glass sphere's highlight: errors of
+            # 0.05-0.11); with FIRST_ROUND footprint samples that agree such
+            # a pixel then stops.
+            raw = corner_contrast(corner_colour, centre)
             centre = np.where(fp[..., None], centre - self.sampler.centre_checker, centre)
-            contrast = np.where(fp, corner_contrast(corner_colour - self.sampler.corner_checker, centre),
-                                corner_contrast(corner_colour, centre))
+            contrast = np.where(fp, corner_contrast(corner_colour - self.sampler.corner_checker, centre), raw)
+            flag_contrast = contrast if chain is None else np.where(chain, raw, contrast)
+            direct = fp if chain is None else fp & ~chain
         else:
-            contrast = corner_contrast(corner_colour, centre)
+            contrast = flag_contrast = corner_contrast(corner_colour, centre)
+            direct = None
         level = max(self.target_error, FLAG_CONTRAST)
-        flagged = contrast > level
+        flagged = flag_contrast > level
         if self.target_error < EDGE_ERROR:
             # an edge whose sides look alike (within the target) is no error:
             # a box of one colour stays at one sample
-            flagged |= corner_objects_differ(corner_obj, obj) & (contrast > self.target_error)
+            flagged |= corner_objects_differ(corner_obj, obj) & (flag_contrast > self.target_error)
             yield
             cells = checker_cells_differ(scene, corner_t, corner_obj)
-            flagged |= cells if fp is None else cells & ~fp
+            flagged |= cells if direct is None else cells & ~direct
         bends = np.array([scene.scatters(o) for o in scene.objects] + [False])
         through = _fold(np.logical_or, [bends[o] for o in _corners(corner_obj) + [obj]])
         if through.any():
             yield
-            flagged |= through & (colour_contrast(centre) > level)
+            seen = centre if chain is None else np.where(chain[..., None], centre + self.sampler.centre_checker, centre)
+            flagged |= through & (colour_contrast(seen) > level)
         return flagged, contrast
 
     def _run(self):
