@@ -1390,8 +1390,10 @@ def test_chain_footprints_take_a_projective_grid_and_refuse_a_bent_one():
         q = m[2, 0] * i + m[2, 1] * j + m[2, 2]
         return (m[0, 0] * i + m[0, 1] * j + m[0, 2]) / q, (m[1, 0] * i + m[1, 1] * j + m[1, 2]) / q
 
-    out = A.chain_footprints(CHAIN_PLANE, _corner_grid(w, h, proj))
+    found = A.chain_footprints(CHAIN_PLANE, _corner_grid(w, h, proj))
+    out = found.dense()
     has = out[..., 7] > 0
+    assert np.array_equal(found.mask, has)
     assert has[1:-1, 1:-1].all() and not has[0].any() and not has[-1].any() and not has[:, 0].any()
     assert (out[has][:, 7] == 1).all() and (out[has][:, 3] == 7).all()
     for j, i in zip(*np.nonzero(has)):
@@ -1407,21 +1409,21 @@ def test_chain_footprints_take_a_projective_grid_and_refuse_a_bent_one():
     def bent(i, j):                       # a bend of 0.1 x the side per pixel squared
         x, z = proj(i, j)
         return x + 0.1 * 0.11 * (i - 6.0) ** 2, z
-    assert not (A.chain_footprints(CHAIN_PLANE, _corner_grid(w, h, bent))[..., 7] > 0).any()
+    assert not (A.chain_footprints(CHAIN_PLANE, _corner_grid(w, h, bent)).mask).any()
 
     grid = _corner_grid(w, h, proj)
     grid[4, 5, 2] = 8.0                   # another chain at corner (5, 4)
-    has2 = A.chain_footprints(CHAIN_PLANE, grid)[..., 7] > 0
+    has2 = A.chain_footprints(CHAIN_PLANE, grid).mask
     near = np.zeros((h, w), bool)
     near[2:6, 3:7] = True                 # pixels whose corners or neighbouring corners include it
     assert not (has2 & near)[3:5, 4:6].any() and np.array_equal(has2 & ~near, has & ~near)
-    assert not (A.chain_footprints(CHAIN_PLANE, _corner_grid(w, h, proj, ident=0.0))[..., 7] > 0).any()
+    assert not (A.chain_footprints(CHAIN_PLANE, _corner_grid(w, h, proj, ident=0.0)).mask).any()
     planes = np.full((h, w), -1)
     planes[4, 6] = 0
-    assert not A.chain_footprints(CHAIN_PLANE, _corner_grid(w, h, proj), planes)[4, 6, 7]
+    assert not A.chain_footprints(CHAIN_PLANE, _corner_grid(w, h, proj), planes).mask[4, 6]
     plain = make_scene({"lights": [], "materials": {"f": {"color": [0.8] * 3}},
                         "objects": [{"type": "plane", "material": "f"}]}, name="plain-plane")
-    assert not (A.chain_footprints(plain, _corner_grid(w, h, proj))[..., 7] > 0).any()
+    assert not (A.chain_footprints(plain, _corner_grid(w, h, proj)).mask).any()
 
 
 SLAB_CHECKER = {
@@ -1454,7 +1456,7 @@ def test_chain_footprints_take_the_checker_seen_through_glass(renderer_for):
         _, _, corner_obj = drain(sampler.corner_pass())
         planes = A.footprint_planes(r.scene, corner_obj)
         chain = A.chain_footprints(r.scene, sampler.corner_chain, planes)
-        has = chain[..., 7] > 0
+        has = chain.mask
         sampler.set_footprint(planes, chain)
         with_chain, _, _ = drain(sampler.first_pass())
         sampler.set_footprint(planes, None)

@@ -327,6 +327,10 @@ def footprint_planes(scene, corner_obj: np.ndarray) -> np.ndarray:
 CHAIN_TOLERANCE = 0.02
 #: The extrapolation factor of that check (see above).
 CHAIN_REACH = 8.0
+#: Chain footprints per row of their texture (three texels each): a 1280x720
+#: image's (46,000 on glass-sphere) in 45 rows, where one texel per pixel
+#: would upload 44 MB.
+CHAIN_ENTRIES_PER_ROW = 1024
 
 
 def square_homography(p: np.ndarray) -> np.ndarray:
@@ -365,9 +369,31 @@ def apply_homography(m: np.ndarray, u, v) -> tuple[np.ndarray, np.ndarray, np.nd
     return x, z, w
 
 
-def chain_footprints(scene, chain: np.ndarray, planes: np.ndarray | None = None) -> np.ndarray:
-    """(H, W, 12) float32 texels of the chain footprints (footprint.glsl):
-    per pixel (X, id, Z, k + 1, W, tolerance^2), zero where there is none.
+class ChainFootprints(NamedTuple):
+    """The chain footprints of an image (chain_footprints): the pixels that
+    have one, as flat indices j * W + i in increasing order, and each one's
+    three texels (footprint.glsl), (n, 12) float32: (X, id, Z, k + 1, W,
+    tolerance^2)."""
+    pixels: np.ndarray
+    texels: np.ndarray
+    shape: tuple[int, int]            # (H, W)
+
+    @property
+    def mask(self) -> np.ndarray:
+        """(H, W) bool: the pixels with a chain footprint."""
+        out = np.zeros(self.shape[0] * self.shape[1], bool)
+        out[self.pixels] = True
+        return out.reshape(self.shape)
+
+    def dense(self) -> np.ndarray:
+        """(H, W, 12): each pixel's texels, zero where it has none."""
+        out = np.zeros((self.shape[0] * self.shape[1], 12), np.float32)
+        out[self.pixels] = self.texels
+        return out.reshape(self.shape + (12,))
+
+
+def chain_footprints(scene, chain: np.ndarray, planes: np.ndarray | None = None) -> ChainFootprints:
+    """The chain footprints (ChainFootprints) from the corner rays.
 
     chain (H + 1, W + 1, 4): each corner ray's chainLeaf (x, z camera-
     relative, chain id, object; object -1: none).  A pixel has a chain
@@ -378,10 +404,12 @@ def chain_footprints(scene, chain: np.ndarray, planes: np.ndarray | None = None)
     predicts the eight neighbouring corners (on the same chain) within
     CHAIN_REACH x CHAIN_TOLERANCE of the square's side on the plane."""
     hh, ww = chain.shape[0] - 1, chain.shape[1] - 1
-    out = np.zeros((hh, ww, 12), np.float32)
+    none = ChainFootprints(np.zeros(0, np.int64), np.zeros((0, 12), np.float32), (hh, ww))
     if hh < 3 or ww < 3:
-        return out
-    obj, ident = chain[..., 3], chain[..., 2]          # whole numbers, compared as floats
+        return none
+    # whole numbers, compared as floats; contiguous (a strided view of the
+    # grid makes each comparison below several times slower)
+    obj, ident = np.ascontiguousarray(chain[..., 3]), np.ascontiguousarray(chain[..., 2])
     # the pixels whose four corners share their top-left one's object and
     # chain id, that id not the camera ray's own (0) and the object not the sky
     o0, i0 = obj[:-1, :-1], ident[:-1, :-1]
@@ -397,9 +425,9 @@ def chain_footprints(scene, chain: np.ndarray, planes: np.ndarray | None = None)
     on_checker = checkered_planes(scene)[k]
     jj, ii, k = jj[on_checker], ii[on_checker], k[on_checker]
     if len(jj) == 0:
-        return out
-    pts = chain[..., :2].astype(np.float64)
-    quad = np.stack([pts[jj, ii], pts[jj, ii + 1], pts[jj + 1, ii], pts[jj + 1, ii + 1]], axis=1)
+        return none
+    pts = chain[..., :2]                       # only the candidates' corners are read
+    quad = np.stack([pts[jj, ii], pts[jj, ii + 1], pts[jj + 1, ii], pts[jj + 1, ii + 1]], axis=1).astype(np.float64)
     m = square_homography(quad)
     good = np.isfinite(m).all(axis=(1, 2))
     for u, v in ((0, 0), (1, 0), (0, 1), (1, 1)):
@@ -419,10 +447,11 @@ def chain_footprints(scene, chain: np.ndarray, planes: np.ndarray | None = None)
     tol = CHAIN_TOLERANCE * side
     good &= np.isfinite(worst) & (worst <= CHAIN_REACH * tol) & (side > 0.0)
     jj, ii, m, k, c, tol = jj[good], ii[good], m[good], k[good], c[good], tol[good]
-    out[jj, ii, 0:3], out[jj, ii, 3] = m[:, 0], c
-    out[jj, ii, 4:7], out[jj, ii, 7] = m[:, 1], k + 1
-    out[jj, ii, 8:11], out[jj, ii, 11] = m[:, 2], tol * tol
-    return out
+    texels = np.empty((len(jj), 12), np.float32)
+    texels[:, 0:3], texels[:, 3] = m[:, 0], c
+    texels[:, 4:7], texels[:, 7] = m[:, 1], k + 1
+    texels[:, 8:11], texels[:, 11] = m[:, 2], tol * tol
+    return ChainFootprints(jj * ww + ii, texels, (hh, ww))      # np.nonzero's order: increasing
 
 
 @lru_cache(maxsize=16)
@@ -743,13 +772,12 @@ class AdaptiveSampler:
     def list_defines(self) -> dict:
         return self.FOOTPRINT_LIST if self._footprint_tex is not None else self.LIST
 
-    def set_footprint(self, planes: np.ndarray | None, chain: np.ndarray | None = None) -> None:
+    def set_footprint(self, planes: np.ndarray | None, chain: "ChainFootprints | None" = None) -> None:
         """Footprint samples (shaders/lib/footprint.glsl) from now on: on the
         plane `planes` gives for each pixel ((H, W) object index, -1: point
         samples; top row first; see footprint_planes) and, where it gives
-        none, through the chain footprints `chain` ((H, W, 12) texels of
-        chain_footprints; None: none), or point samples everywhere (planes
-        None)."""
+        none, through the chain footprints `chain` (chain_footprints; None:
+        none), or point samples everywhere (planes None)."""
         for tex in (self._footprint_tex, self._chain_tex):
             if tex is not None:
                 tex.release()
@@ -760,15 +788,23 @@ class AdaptiveSampler:
             raise ValueError("footprint samples need an AdaptiveSampler made with footprint=True")
         if planes.max() >= MAX_FOOTPRINT_OBJECTS:
             raise ValueError(f"footprint samples take object indices below {MAX_FOOTPRINT_OBJECTS}")
-        # texel: (k + 1) / 255 in an 8-bit normalised texture, rows bottom first
-        data = np.ascontiguousarray((planes[::-1] + 1).astype(np.uint8))
-        self._footprint_tex = self.ctx.texture((self.width, self.height), 1, data.tobytes())
+        # texel (R32F, rows bottom first): k + 1 for a directly seen plane k,
+        # -(e + 1) for chain footprint e, 0 for point samples (whole numbers
+        # below 2^24: exact in a float)
+        code = (planes + 1).astype(np.float32).ravel()
+        n = 0 if chain is None else len(chain.pixels)
+        if n:
+            code[chain.pixels] = -1.0 - np.arange(n, dtype=np.float32)
+        data = np.ascontiguousarray(code.reshape(self.height, self.width)[::-1])
+        self._footprint_tex = self.ctx.texture((self.width, self.height), 1, data.tobytes(), dtype="f4")
         self._footprint_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
-        if chain is None:
-            chain = np.zeros((self.height, self.width, 12), np.float32)
-        # texels (3i + r, H - 1 - j): rows bottom first, three RGBA per pixel
-        data = np.ascontiguousarray(chain[::-1].astype(np.float32))
-        self._chain_tex = self.ctx.texture((3 * self.width, self.height), 4, data.tobytes(), dtype="f4")
+        # the chain footprints, compact: entry e at texels (3 (e % C) + r, e // C)
+        c = CHAIN_ENTRIES_PER_ROW
+        rows = max(1, -(-n // c))
+        texels = np.zeros((rows * c, 12), np.float32)
+        if n:
+            texels[:n] = chain.texels
+        self._chain_tex = self.ctx.texture((3 * c, rows), 4, texels.tobytes(), dtype="f4")
         self._chain_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
 
     def _bind_footprint(self, prog) -> None:
@@ -778,6 +814,7 @@ class AdaptiveSampler:
             if "footprintChain" in prog:
                 self._chain_tex.use(location=self.FOOTPRINT_CHAIN_UNIT)
                 prog["footprintChain"].value = self.FOOTPRINT_CHAIN_UNIT
+                prog["chainEntriesPerRow"].value = CHAIN_ENTRIES_PER_ROW
 
     def group_labels(self, programs) -> np.ndarray:
         """(H, W) int8, top row first: which of `programs`' groups of
@@ -1231,10 +1268,13 @@ class AdaptiveRender:
             if self.footprint:
                 planes = footprint_planes(self.scene, corner_obj)
                 chain = getattr(self.sampler, "corner_chain", None)
-                chain = None if chain is None else chain_footprints(self.scene, chain, planes)
+                if chain is not None:
+                    yield                 # (steps of their own: about 0.1 s each at 1280x720)
+                    chain = chain_footprints(self.scene, chain, planes)
+                    yield
                 self.footprint_mask = planes >= 0
                 if chain is not None:
-                    self.chain_mask = chain[..., 7] > 0
+                    self.chain_mask = chain.mask
                     self.footprint_mask |= self.chain_mask
                 self.sampler.set_footprint(planes, chain)
             yield

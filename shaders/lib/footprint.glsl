@@ -1,8 +1,9 @@
 // Footprint samples (viewer/adaptive.py): the checker of a plane
 // box-filtered over a pixel's square, exactly, instead of point-sampled.
 //
-// Texel (i, H - 1 - j) of footprintMask holds (k + 1) / 255 where the four
-// corner rays of pixel (i, j) meet checkered plane k first (0: not so).
+// Texel (i, H - 1 - j) of footprintMask (R32F) holds k + 1 where the four
+// corner rays of pixel (i, j) meet checkered plane k first, -(e + 1) where
+// the pixel has chain footprint e (below), 0 for point samples.
 // The directions that meet a plane form a convex set, so every ray through
 // the pixel's square meets plane k, unless another object pokes in between
 // the corners (a sample that meets that object first stays a point sample).
@@ -37,9 +38,11 @@
 // loop's trip count is 0 in the lanes that do not need it.
 
 uniform sampler2D footprintMask;
-// Texels (3i + r, H - 1 - j), r = 0, 1, 2, of pixel (i, j): (fpX, chain),
-// (fpZ, k + 1), (fpW, tolerance^2) of its chain footprint (k + 1 = 0: none).
+// Chain footprint e at texels (3 (e % chainEntriesPerRow) + r, e /
+// chainEntriesPerRow), r = 0, 1, 2: (fpX, chain id), (fpZ, k + 1), (fpW,
+// tolerance^2).
 uniform sampler2D footprintChain;
+uniform int chainEntriesPerRow;
 int footprintObject = -1;     // k, or -1: this pixel takes point samples
 float footprintChainId = 0.0; // the principal chain its samples must follow (0: the camera ray itself)
 float pixelShare = -1.0;      // the closed form's share (-1: none)
@@ -200,7 +203,7 @@ float rowCoverage(int k, float v, bool need) {
 void setFootprintPixel(vec2 ij) {
     int row = int(imageSize.y - 1.0 - ij.y);
     float code = texelFetch(footprintMask, ivec2(ij.x, row), 0).r;
-    footprintObject = int(code * 255.0 + 0.5) - 1;
+    footprintObject = code > 0.5 ? int(code + 0.5) - 1 : -1;
     footprintChainId = 0.0;
     fpTol2 = INF;
     vec2 uv0 = ij / imageSize;
@@ -213,10 +216,12 @@ void setFootprintPixel(vec2 ij) {
     fpX = vec3(pixEu.x, pixEv.x, pixD00.x);
     fpZ = vec3(pixEu.z, pixEv.z, pixD00.z);
     fpW = vec3(pixEu.y, pixEv.y, pixD00.y) / h;
-    if (footprintObject < 0) {
-        vec4 t0 = texelFetch(footprintChain, ivec2(3 * int(ij.x), row), 0);
-        vec4 t1 = texelFetch(footprintChain, ivec2(3 * int(ij.x) + 1, row), 0);
-        vec4 t2 = texelFetch(footprintChain, ivec2(3 * int(ij.x) + 2, row), 0);
+    if (code < -0.5) {
+        int e = int(-code + 0.5) - 1;
+        ivec2 at = ivec2(3 * (e % chainEntriesPerRow), e / chainEntriesPerRow);
+        vec4 t0 = texelFetch(footprintChain, at, 0);
+        vec4 t1 = texelFetch(footprintChain, at + ivec2(1, 0), 0);
+        vec4 t2 = texelFetch(footprintChain, at + ivec2(2, 0), 0);
         footprintObject = int(t1.w + 0.5) - 1;
         footprintChainId = t0.w;
         fpX = t0.xyz; fpZ = t1.xyz; fpW = t2.xyz;
