@@ -814,7 +814,8 @@ class AdaptiveSampler:
             if "footprintChain" in prog:
                 self._chain_tex.use(location=self.FOOTPRINT_CHAIN_UNIT)
                 prog["footprintChain"].value = self.FOOTPRINT_CHAIN_UNIT
-                prog["chainEntriesPerRow"].value = CHAIN_ENTRIES_PER_ROW
+                if "chainEntriesPerRow" in prog:
+                    prog["chainEntriesPerRow"].value = CHAIN_ENTRIES_PER_ROW
 
     def group_labels(self, programs) -> np.ndarray:
         """(H, W) int8, top row first: which of `programs`' groups of
