@@ -212,10 +212,12 @@ void setFootprintPixel(vec2 ij) {
     pixEv = (-2.0 / imageSize.y) * camUp;
     // the camera ray D = pixD00 + u pixEu + v pixEv meets the plane y = h
     // at t = h / D.y > 0: x = h D.x / D.y, z = h D.z / D.y
+    // (h != 0 wherever a pixel's corners all meet the plane; the guard
+    // keeps the rows finite where footprintObject is -1 and unused)
     float h = objects[max(footprintObject, 0)].a.x;
     fpX = vec3(pixEu.x, pixEv.x, pixD00.x);
     fpZ = vec3(pixEu.z, pixEv.z, pixD00.z);
-    fpW = vec3(pixEu.y, pixEv.y, pixD00.y) / h;
+    fpW = vec3(pixEu.y, pixEv.y, pixD00.y) / (h != 0.0 ? h : 1.0);
     if (code < -0.5) {
         int e = int(-code + 0.5) - 1;
         ivec2 at = ivec2(3 * (e % chainEntriesPerRow), e / chainEntriesPerRow);
