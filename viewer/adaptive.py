@@ -137,8 +137,10 @@ SPREAD_EXPONENT = 0.75
 SPREAD_WEIGHT = 0.5
 #: A pixel's error is at least this share of its worst neighbour's.
 NEIGHBOUR_SHARE = 0.25
-#: Footprint samples name their plane in an 8-bit texel (k + 1): scenes with
-#: more objects take point samples only.
+#: Scenes with this many objects or more take point samples only (the
+#: footprint mask held k + 1 in an 8-bit texel when this was set; it is a
+#: float texel now, which could name more, but no scene that large was
+#: measured).
 MAX_FOOTPRINT_OBJECTS = 255
 #: How a pixel's footprint samples take the checker (the first pass reports
 #: it): over the whole pixel, exactly, or along each sample's row.
@@ -732,7 +734,7 @@ class AdaptiveSampler:
         self._list_targets: list = []
         self._list_size = (0, 0)
         self._offsets_tex = None
-        self._mrt: dict[tuple[int, int], moderngl.Framebuffer] = {}
+        self._mrt: dict[tuple[tuple[int, int], int], moderngl.Framebuffer] = {}
         self._labels_key, self._labels = None, None      # group_labels' last answer
         #: pixel-samples one draw call may trace; read before every draw, so
         #: the viewer can fit draws into its frame budget as it goes
@@ -831,25 +833,30 @@ class AdaptiveSampler:
             self._labels_key, self._labels = key, labels
         return self._labels
 
-    def _mrt_target(self, size) -> moderngl.Framebuffer:
-        """Five RGBA32F targets of `size` for the ADAPTIVE_FIRST variants
+    #: the channels of the ADAPTIVE_FIRST variants' outputs that are read
+    #: back: (sum L, 1), L.L, (t, object, rays), (checker part, footprint
+    #: kind), chain leaf
+    MRT_CHANNELS = (4, 1, 3, 4, 4)
+
+    def _mrt_target(self, size, count: int) -> moderngl.Framebuffer:
+        """The first `count` of the ADAPTIVE_FIRST variants' five outputs
         (sums, square, first interaction, the checker's part, the chain
-        leaf), kept for the
-        sampler's life: at 1280x720 making them costs as much as a sample of
-        the sky."""
-        fbo = self._mrt.get(size)
+        leaf) as RGBA32F targets of `size`, kept for the sampler's life: at
+        1280x720 making them costs as much as a sample of the sky.  (An
+        output with no target is not written.)"""
+        fbo = self._mrt.get((size, count))
         if fbo is None:
-            texs = [self.ctx.texture(size, 4, dtype="f4") for _ in range(5)]
-            fbo = self._mrt[size] = self.ctx.framebuffer(color_attachments=texs)
+            texs = [self.ctx.texture(size, 4, dtype="f4") for _ in range(count)]
+            fbo = self._mrt[(size, count)] = self.ctx.framebuffer(color_attachments=texs)
         return fbo
 
-    def _mrt_pass(self, size, band_programs, offset):
-        """Draw one sample of the ADAPTIVE_FIRST variants into the three
-        targets of `size`, in bands of rows (one draw call each, a yield
-        after each); band_programs() gives the (program, rects) to draw a
-        band with.  Returns the four attachments, top row first."""
+    def _mrt_pass(self, size, band_programs, offset, count: int):
+        """Draw one sample of the ADAPTIVE_FIRST variants into the first
+        `count` targets of `size`, in bands of rows (one draw call each, a
+        yield after each); band_programs() gives the (program, rects) to
+        draw a band with.  Returns those attachments, top row first."""
         ctx, (w, h) = self.ctx, size
-        fbo = self._mrt_target(size)
+        fbo = self._mrt_target(size, count)
         try:
             top = 0                                   # bands of rows from the top cover every pixel
             while top < h:
@@ -873,10 +880,9 @@ class AdaptiveSampler:
                 ctx.scissor = None
                 top += rows
                 yield
-            # only the channels the attachments use: (sum L, 1), L.L, (t, object, rays),
-            # (checker part, footprint kind), chain leaf
+            # only the channels the attachments use
             return [np.frombuffer(fbo.read(attachment=k, components=c, dtype="f4"), np.float32)
-                    .reshape(h, w, c)[::-1] for k, c in enumerate((4, 1, 3, 4, 4))]
+                    .reshape(h, w, c)[::-1] for k, c in enumerate(self.MRT_CHANNELS[:count])]
         finally:
             ctx.scissor = None
 
@@ -894,7 +900,9 @@ class AdaptiveSampler:
         reflected, refracted and shadow rays: what Renderer.ray_cost
         counts)."""
         # the programs fetched per band pick up a variant compiled since
-        out = yield from self._mrt_pass((self.width, self.height), lambda: self._programs(self.first_defines), offset)
+        # (no chain leaf: only the corner rays' is used)
+        out = yield from self._mrt_pass((self.width, self.height), lambda: self._programs(self.first_defines),
+                                        offset, 4)
         self.centre_checker = np.ascontiguousarray(out[3][..., :3], np.float64)
         self.footprint_kind = np.rint(out[3][..., 3]).astype(np.int8)
         sums = Sums(np.ascontiguousarray(out[0], np.float64), np.ascontiguousarray(out[1][..., 0], np.float64))
@@ -911,7 +919,7 @@ class AdaptiveSampler:
         (colour (H+1, W+1, 3), t, object (H+1, W+1)), top-left corner
         first."""
         full = [(self.renderer.variant(**self.FIRST), ((0, 0, self.width + 1, self.height + 1),))]
-        out = yield from self._mrt_pass((self.width + 1, self.height + 1), lambda: full, (0.0, 1.0))
+        out = yield from self._mrt_pass((self.width + 1, self.height + 1), lambda: full, (0.0, 1.0), 5)
         self.corner_checker = np.ascontiguousarray(out[3][..., :3], np.float64)
         self.corner_chain = np.ascontiguousarray(out[4], np.float64)
         t, obj = self._first_hits(out[2])
@@ -1231,14 +1239,15 @@ class AdaptiveRender:
             # pixel (bench-many, a glass sphere's highlight: errors of
             # 0.05-0.11); with FIRST_ROUND footprint samples that agree such
             # a pixel then stops.
-            raw = corner_contrast(corner_colour, centre)
-            centre = np.where(fp[..., None], centre - self.sampler.centre_checker, centre)
-            contrast = np.where(fp, corner_contrast(corner_colour - self.sampler.corner_checker, centre), raw)
-            flag_contrast = contrast if chain is None else np.where(chain, raw, contrast)
             direct = fp if chain is None else fp & ~chain
+            removed = centre - self.sampler.centre_checker
+            raw = corner_contrast(corner_colour, centre)
+            contrast = np.where(fp, corner_contrast(corner_colour - self.sampler.corner_checker, removed), raw)
+            flag_contrast = np.where(direct, contrast, raw)
+            seen = np.where(direct[..., None], removed, centre)
         else:
             contrast = flag_contrast = corner_contrast(corner_colour, centre)
-            direct = None
+            direct, seen = None, centre
         level = max(self.target_error, FLAG_CONTRAST)
         flagged = flag_contrast > level
         if self.target_error < EDGE_ERROR:
@@ -1252,7 +1261,6 @@ class AdaptiveRender:
         through = _fold(np.logical_or, [bends[o] for o in _corners(corner_obj) + [obj]])
         if through.any():
             yield
-            seen = centre if chain is None else np.where(chain[..., None], centre + self.sampler.centre_checker, centre)
             flagged |= through & (colour_contrast(seen) > level)
         return flagged, contrast
 
