@@ -54,7 +54,8 @@ int firstObject = -1;
 vec3 firstChecker = vec3(0.0);
 // Where the camera ray's principal chain (see Branch) ends on an opaque
 // surface: (x, z camera-relative, chain id, object); object -1: it leaves
-// the scene or is cut (max_depth, min_weight) first.
+// the scene (x, z 0; the id still the chain's) or is cut (max_depth,
+// min_weight) first (all 0).
 vec4 chainLeaf = vec4(0.0, 0.0, 0.0, -1.0);
 #define RECORD_FIRST(br, it) if (br.depth == 1) { firstT = length(it.p - br.o); firstObject = it.object; }
 #else
@@ -421,7 +422,13 @@ void walkNode(Branch br, inout vec3 sum, out Branch reflected, out Branch refrac
     Interaction it;
     bool hit = nextInteraction(br.o, br.d, mask, atten, it);
     vec3 w = br.w * atten;
-    if (!hit) { sum += w * skyRadiance(br.d); return; }
+    if (!hit) {
+        sum += w * skyRadiance(br.d);
+#ifdef ADAPTIVE_FIRST
+        if (br.chain >= 0.0) chainLeaf = vec4(0.0, 0.0, br.chain, -1.0);
+#endif
+        return;
+    }
     RECORD_FIRST(br, it)
     if (maxComponent(w) <= 0.0) return;
     Material m = materials[objects[it.object].info.y];
