@@ -43,7 +43,7 @@ W, H = 320, 180
 REFERENCE_SAMPLES = 512
 OUT = Path("bench-results/adaptive")
 SETTINGS = [("uniform", 16), ("uniform", 32), ("uniform", 64),
-            ("adaptive", 4), ("adaptive", 6), ("adaptive", 8), ("adaptive", 12), ("adaptive", 16),
+            ("adaptive", 4), ("adaptive", 6), ("adaptive", 7), ("adaptive", 8), ("adaptive", 12), ("adaptive", 16),
             ("adaptive", 24), ("adaptive", 32),
             ("adaptive-point", 8), ("adaptive-point", 16), ("adaptive-point", 24), ("adaptive-point", 32)]
 REPEAT = 5

@@ -70,7 +70,9 @@ picture inside glass); a flat region is exact with one centred sample.  So:
 Measured (README, "Adaptive anti-aliasing"; tools/adaptive_vs_uniform.py):
 against a 512-sample float64 reference at 320x180 footprint samples reach
 the error of 64 uniform samples with 4 rays per pixel on glass-sphere (5
-before chain footprints) and 11 on the default scene.  With point samples only, this estimator
+before chain footprints) and 7-8 on the default scene (11 before the
+flags at glass boundaries whose sides look alike, and the cap's last
+upgrade).  With point samples only, this estimator
 and the corner rays needed about 26 on glass-sphere, where the
 3x3-neighbourhood flags and an
 even/odd-halves estimate of the first version needed between 32 and 64.
