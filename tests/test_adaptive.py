@@ -907,9 +907,9 @@ def test_budget_and_per_pixel_cap(renderer_for, key, samples, max_spp):
 def test_a_cap_between_doublings_is_reached(renderer_for, samples, max_spp):
     """A cap that is not one of the doublings (24, 12; the default 8 x
     samples is one only for some budgets) is still reached: the last
-    upgrade goes from 16 (8) to the cap instead of stopping below it (where edge pixels wanted more: at 320x180 the
-    default scene's budget 7, cap 56, had 6711 pixels held at 32 with 76%
-    of the squared error)."""
+    upgrade goes from 16 (8) to the cap instead of stopping below it,
+    where edge pixels wanted more (at 320x180 the default scene's budget
+    7, cap 56, had 6711 pixels held at 32 with 76% of the squared error)."""
     r = renderer_for("glass-sphere")
     res = render_adaptive(r, 48, 27, samples=samples, seed=1, max_spp=max_spp)
     assert res.spp.max() == max_spp, np.unique(res.spp, return_counts=True)

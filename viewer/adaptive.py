@@ -12,7 +12,8 @@ picture inside glass); a flat region is exact with one centred sample.  So:
    differ in colour by more than max(target, FLAG_CONTRAST), or meet
    different objects where the colours differ by more than the target (or
    at all, where one of them is glass or a mirror), or follow different
-   principal chains through glass (below), or land on one checkered surface in different squares of it (a square's
+   principal chains through glass (step 3), or land on one checkered
+   surface in different squares of it (a square's
    corner can poke into a pixel without reaching any of its corners; this
    is exact for a footprint that is flat on the surface, so the checker
    toward the horizon, many squares per pixel, is flagged too).  Where one
