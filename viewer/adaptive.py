@@ -1239,8 +1239,10 @@ class AdaptiveRender:
         return drain(self._flag_steps(centre, obj, corner_colour, corner_t, corner_obj))
 
     def _flag_steps(self, centre, obj, corner_colour, corner_t, corner_obj):
-        """flags() as a generator that yields between its parts (each about
-        0.1 s of numpy at 1280x720: the viewer draws a frame in between)."""
+        """flags() as a generator that yields between its parts (each 0.06-0.13
+        s of numpy at 1280x720: the viewer draws a frame in between; as one
+        step, the corner contrasts and the object and chain flags took 0.37
+        s, the viewer's longest frame)."""
         scene = self.scene
         fp = None if self.footprint_mask is None else self.sampler.footprint_kind == FOOTPRINT_EXACT
         chain = None if fp is None or self.chain_mask is None else fp & self.chain_mask
@@ -1261,6 +1263,7 @@ class AdaptiveRender:
             direct = fp if chain is None else fp & ~chain
             removed = centre - self.sampler.centre_checker
             raw = corner_contrast(corner_colour, centre)
+            yield
             contrast = np.where(fp, corner_contrast(corner_colour - self.sampler.corner_checker, removed), raw)
             flag_contrast = np.where(direct, contrast, raw)
             seen = np.where(direct[..., None], removed, centre)
@@ -1269,6 +1272,7 @@ class AdaptiveRender:
             direct, seen = None, centre
         level = max(self.target_error, FLAG_CONTRAST)
         flagged = flag_contrast > level
+        yield
         bends = np.array([scene.scatters(o) for o in scene.objects] + [False])
         through = _fold(np.logical_or, [bends[o] for o in _corners(corner_obj) + [obj]])
         if self.target_error < EDGE_ERROR:
