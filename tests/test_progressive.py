@@ -102,7 +102,7 @@ def test_display_shows_the_encoded_image_and_the_preview_until_samples_land(setu
     shown = np.frombuffer(out.read(components=3), np.uint8).reshape(h, w, 3)[::-1]
     expected = to_display8(r.render(w, h, 3))
     assert np.abs(shown.astype(int) - expected.astype(int)).max() <= 1
-    out.release()
+    release_target(out)
 
 
 def test_resize_and_zero_size(setup):
@@ -165,6 +165,16 @@ def accum_mean(p: Progressive) -> tuple[np.ndarray, np.ndarray]:
     return acc[..., :3] / np.maximum(count, 1)[..., None], count
 
 
+def release_target(out) -> None:
+    """Release a simple_framebuffer and its renderbuffers (Framebuffer.release
+    leaves its attachments: two renderbuffers leaked per call, which
+    _gl_counts then counted wherever their names fell in its range)."""
+    for attachment in (*out.color_attachments, out.depth_attachment):
+        if attachment is not None:
+            attachment.release()
+    out.release()
+
+
 def shown8(gl, p: Progressive) -> np.ndarray:
     """The display pass's 8-bit output (H, W, 3) int, top row first."""
     w, h = p.size
@@ -173,7 +183,7 @@ def shown8(gl, p: Progressive) -> np.ndarray:
         p.display(out, (0, 0, w, h))
         return np.frombuffer(out.read(components=3), np.uint8).reshape(h, w, 3)[::-1].astype(int)
     finally:
-        out.release()
+        release_target(out)
 
 
 def run_adaptive(p: Progressive, budget_ms: float = 1e-3, limit: int = 10000) -> list[float]:
@@ -229,7 +239,7 @@ def test_adaptive_accumulation_equals_the_offscreen_adaptive_render(adaptive_set
     out = gl.simple_framebuffer((w, h), components=4)
     p.display(out, (0, 0, w, h))
     shown = np.frombuffer(out.read(components=3), np.uint8).reshape(h, w, 3)[::-1]
-    out.release()
+    release_target(out)
     assert np.abs(shown.astype(int) - to_display8(expected.image).astype(int)).max() <= 1
     assert p.accumulate() == 0.0  # done: no more work
     # another seed is another picture: the seed really reaches the render
