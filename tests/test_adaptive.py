@@ -355,6 +355,83 @@ def test_list_width_spreads_short_lists_over_several_bands():
         assert lw == 4 or n >= lw * 64 * A.LIST_MIN_BINS
 
 
+@pytest.mark.parametrize("count, width", [(1, 4), (17, 4), (192, 4), (600, 8), (5000, 64), (70000, 4)])
+def test_run_slots_deal_short_runs_over_bands(count, width):
+    """run_slots is one-to-one inside run_rows rows; every 16 consecutive
+    entries stay in one 4x4 block; a run that fills fewer than
+    LIST_MIN_BINS bands of 64 rows is dealt over min(LIST_MIN_BINS, its
+    blocks) of them, as evenly as whole blocks allow (llvmpipe shades each
+    64x64 square on one thread: a short run in one band ran on one core);
+    a long one stays list_slots' dense layout."""
+    bands = A.run_bands(count, width)
+    slots = A.run_slots(count, width, bands)
+    assert len(np.unique(slots)) == count
+    x, y = slots % width, slots // width
+    assert x.max() < width and y.max() < A.run_rows(count, width, bands)
+    for k in range(0, count, 16):
+        bx, by = x[k:k + 16], y[k:k + 16]
+        assert bx.max() - bx.min() < 4 and by.max() - by.min() < 4 and bx.min() % 4 == 0 and by.min() % 4 == 0
+    blocks = -(-count // 16)
+    if blocks >= A.LIST_MIN_BINS * (width // 4) * 16:
+        assert bands == 1 and np.array_equal(slots, list_slots(count, width))
+    else:
+        assert bands == min(A.LIST_MIN_BINS, blocks)
+        per_band = np.bincount(y // 64, minlength=bands)
+        assert len(per_band) == bands and per_band.max() - per_band.min() <= 16
+
+
+def test_split_factor_fills_a_short_run_with_whole_parts():
+    """A run of `length` pixels taking `samples` samples each is split into
+    the fewest equal parts per pixel that make MIN_RUN_ENTRIES entries and
+    hold at most `most` samples each, or one sample an entry; a long run
+    without `most` is not split."""
+    m = A.MIN_RUN_ENTRIES
+    assert A.split_factor(m, 32) == 1 and A.split_factor(10 ** 5, 64) == 1
+    assert A.split_factor(5, 0) == 1 and A.split_factor(5, 1) == 1
+    assert A.split_factor(10 ** 5, 64, most=4) == 16
+    for length in (1, 6, 40, 100, 300, m - 1, m, 10 ** 4):
+        for samples in (3, 4, 8, 24, 32, 56, 64):
+            for most in (None, 1, 4, 8):
+                d = A.split_factor(length, samples, most)
+                cap = samples if most is None else most
+                assert samples % d == 0
+
+                def fits(e):
+                    return length * e >= m and samples // e <= cap
+                if any(samples % e == 0 and fits(e) for e in range(1, samples)):
+                    assert fits(d)
+                    assert all(samples % e or not fits(e) for e in range(1, d))   # the fewest
+                else:
+                    assert d == samples
+
+
+def test_split_entries_give_each_pixel_its_own_sums(renderer_for):
+    """add_samples deals a short list's samples to several entries per pixel
+    and adds them back: the same sums as one entry per pixel (to float32
+    rounding), in the order of the pixels given.  The pixels take different
+    counts, so that each is split by its own run's factor; a sum sent to
+    the wrong pixel or a sample traced twice would differ by far more."""
+    r = renderer_for("glass-sphere")
+    w, h = 48, 27
+    got = {}
+    for split in (False, True):
+        s = AdaptiveSampler(r, w, h)
+        try:
+            s.split_entries = split
+            s.set_offsets(A._offsets(64, 1))
+            pixels = np.array([5 * w + 7, 13 * w + 24, 13 * w + 25, 20 * w + 30, 2 * w + 40])
+            first = np.array([1, 4, 1, 8, 0])
+            count = np.array([31, 24, 3, 56, 64])
+            got[split] = drain(s.add_samples(pixels, first, count))
+        finally:
+            s.release()
+    (t0, q0), (t1, q1) = got[False], got[True]
+    np.testing.assert_array_equal(t1[:, 3], count)
+    np.testing.assert_allclose(t1, t0, rtol=1e-6)
+    np.testing.assert_allclose(q1, q0, rtol=1e-6)
+    assert np.ptp(t0[:, 0] / t0[:, 3]) > 1e-3           # the pixels differ: a mix-up would show
+
+
 def test_standard_error_of_hand_made_samples():
     """Sums built from their definition for sample lists with known spreads
     (red channel only unless said): 0,1,0,1 and 0,1,1,0: s^2 = 1/3, se

@@ -90,7 +90,11 @@ texture (its first sample index and count there too; the offsets come from
 a texture), in coherent order (Z-order inside 8x8 image tiles, 4x4 blocks
 of the list), one run of the list per culling group (viewer/culling.py:
 each run is drawn by the shader compiled for the objects its tiles can
-meet) and per sample count.  Samples follow sampling.progressive_offsets,
+meet) and per sample count.  A short run is dealt over several bands of
+64 rows (llvmpipe shades each 64x64 square of a framebuffer on one
+thread), and where few pixels take a count, each one's samples are split
+over several entries (the last rounds: a few glass pixels with 32 samples
+each filled a few SIMD lanes of one thread).  Samples follow sampling.progressive_offsets,
 so every prefix is evenly spread; everything is deterministic for a seed.
 The target error is per pixel, in linear radiance units (the .npy values),
 on the largest colour channel.
@@ -722,6 +726,83 @@ def list_slots(count: int, list_width: int) -> np.ndarray:
     return ((b // blocks_x) * LIST_BLOCK + y) * list_width + (b % blocks_x) * LIST_BLOCK + x
 
 
+#: Rows of the llvmpipe bins a framebuffer is cut into (64x64 squares, each
+#: shaded by one thread).
+BIN = 64
+
+
+def run_bands(count: int, list_width: int) -> int:
+    """How many bands of BIN rows a run of `count` entries is spread over:
+    1 where it fills LIST_MIN_BINS bands or more (dense, list_slots), else
+    as many as it has blocks of 16, at most LIST_MIN_BINS (run_slots)."""
+    blocks = -(-count // (LIST_BLOCK * LIST_BLOCK))
+    per_band = (list_width // LIST_BLOCK) * (BIN // LIST_BLOCK)
+    if blocks >= LIST_MIN_BINS * per_band:
+        return 1
+    return max(1, min(LIST_MIN_BINS, blocks))
+
+
+def run_rows(count: int, list_width: int, bands: int) -> int:
+    """Rows a run of `count` entries takes in run_slots' layout."""
+    if bands <= 1:
+        return list_rows(count, list_width)
+    blocks = -(-count // (LIST_BLOCK * LIST_BLOCK))
+    in_first = -(-blocks // bands)                       # band 0 holds the most
+    return BIN * (bands - 1) + LIST_BLOCK * -(-in_first // (list_width // LIST_BLOCK))
+
+
+def run_slots(count: int, list_width: int, bands: int) -> np.ndarray:
+    """Where a run's entries go (texel indices from the run's first row,
+    which is a multiple of BIN when bands > 1): list_slots' blocks of 16,
+    dealt round the `bands` bands of BIN rows (block b into band b % bands),
+    so that a short run (a few pixels that take many samples: the last
+    rounds' glass) is shaded by every thread instead of one."""
+    if bands <= 1:
+        return list_slots(count, list_width)
+    k = np.arange(count, dtype=np.int64)
+    b, r = k // (LIST_BLOCK * LIST_BLOCK), k % (LIST_BLOCK * LIST_BLOCK)
+    x = (r & 1) | ((r >> 1) & 2)              # the Z-order inside a block, as in list_slots
+    y = ((r >> 1) & 1) | ((r >> 2) & 2)
+    s = b // bands                            # the block's place in its band
+    blocks_x = list_width // LIST_BLOCK
+    return (((b % bands) * BIN + (s // blocks_x) * LIST_BLOCK + y) * list_width
+            + (s % blocks_x) * LIST_BLOCK + x)
+
+
+#: A run of the pixel list (one group, one sample count) with fewer pixels
+#: than this has each pixel's samples dealt to several entries (split_factor),
+#: up to one sample each: a few pixels with many samples would otherwise fill
+#: a few SIMD lanes of one thread.
+MIN_RUN_ENTRIES = 512
+#: The most samples one entry of a heavy pixel traces (add_samples' `heavy`:
+#: where a sample traces more than HEAVY_RAYS rays, the glass).  The lanes
+#: of a SIMD block run each ray tree in step, as long as the longest; more
+#: entries of one pixel in a block are more alike trees.  Measured
+#: (default scene, 320x180, its 10765 pixels that trace more than 4 rays, 16
+#: samples each, footprint samples on): 436 ms as one entry a pixel, 379 /
+#: 330 / 344 / 354 ms at 8 / 4 / 2 / 1 samples an entry.  Not for the
+#: cheap pixels: every pixel at one sample an entry took 731 ms against
+#: 518 (the entry's own work, a footprint's closed form among it, is no
+#: longer small beside a sample of the floor).
+HEAVY_ENTRY_SAMPLES = 4
+HEAVY_RAYS = 4
+
+
+def split_factor(length: int, samples: int, most: int | None = None) -> int:
+    """Into how many entries each of a run's `length` pixels, taking
+    `samples` more samples, is split: the least divisor d of samples with
+    length x d >= MIN_RUN_ENTRIES and samples / d <= `most` (None: no
+    limit), else samples (one sample an entry).  Equal parts: every entry
+    of a run loops alike."""
+    if samples <= 1:
+        return 1
+    most = samples if most is None else max(1, most)
+    for d in range(1, samples):
+        if samples % d == 0 and length * d >= MIN_RUN_ENTRIES and samples // d <= most:
+            return d
+    return samples
+
+
 class AdaptiveSampler:
     """The GPU side for one image size: ``first_pass`` traces sample 0 of
     every pixel (with the first interaction of each camera ray),
@@ -759,6 +840,10 @@ class AdaptiveSampler:
         #: the viewer can fit draws into its frame budget as it goes
         self.fragments_per_draw = FRAGMENTS_PER_DRAW
         self.last_draw_fragments = 0     # pixel-samples the latest draw traced
+        #: deal the samples of short runs to several entries (add_samples);
+        #: the viewer's display of a round in flight reads one texel per
+        #: pixel (sums_target), so it turns this off
+        self.split_entries = True
         self._in_flight = None           # (list framebuffer, texel of each entry) during add_samples
         #: what the checker's second colour adds to the colours the latest
         #: first pass ((H, W, 3)) and corner pass ((H + 1, W + 1, 3)) gave,
@@ -965,48 +1050,93 @@ class AdaptiveSampler:
     def _layout(self, pixels: np.ndarray, count: np.ndarray):
         """The pixel list: one run of rows per culling group and sample
         count (drawn with that group's program, all its fragments looping
-        alike), entries placed by list_slots in the order given.  Returns
-        (list width, rows, [(group, samples, first row, rows)], texel index
-        of each entry)."""
+        alike), entries placed by run_slots in the order given (a short run
+        spread over several bands of BIN rows, each starting on a band).
+        Returns (list width, rows, [(group, samples, first row, rows)],
+        texel index of each entry)."""
         n = len(pixels)
         groups = self.group_labels(self._programs(self.list_defines)).ravel()[pixels].astype(np.int64)
         key = groups * (MAX_SPP + 1) + count
         runs_of = [np.flatnonzero(key == k) for k in np.unique(key)]
         lw = list_width(n)
-        while sum(list_rows(len(m), lw) for m in runs_of) > MAX_LIST_HEIGHT and lw < n:
-            lw += LIST_WIDTH
-        slot = np.empty(n, np.int64)
-        runs, row = [], 0
-        for m in runs_of:
-            rows = list_rows(len(m), lw)
-            slot[m] = row * lw + list_slots(len(m), lw)
-            runs.append((int(groups[m[0]]), int(count[m[0]]), row, rows, len(m)))
-            row += rows
-        return lw, max(row, 1), runs, slot
 
-    def add_samples(self, pixels: np.ndarray, first: np.ndarray, count: np.ndarray):
+        def plan(lw, spread):
+            row, out = 0, []
+            for m in runs_of:
+                bands = run_bands(len(m), lw) if spread else 1
+                if bands > 1:
+                    row = -(-row // BIN) * BIN            # a spread run starts on a band
+                out.append((row, bands))
+                row += run_rows(len(m), lw, bands)
+            return row, out
+
+        height, placed = plan(lw, True)
+        if height > MAX_LIST_HEIGHT:                      # too tall for a texture: dense runs, wider
+            while plan(lw, False)[0] > MAX_LIST_HEIGHT and lw < n:
+                lw += LIST_WIDTH
+            height, placed = plan(lw, False)
+        slot = np.empty(n, np.int64)
+        runs = []
+        for m, (row, bands) in zip(runs_of, placed):
+            rows = run_rows(len(m), lw, bands)
+            slot[m] = row * lw + run_slots(len(m), lw, bands)
+            runs.append((int(groups[m[0]]), int(count[m[0]]), row, rows, len(m)))
+        return lw, max(height, 1), runs, slot
+
+    def add_samples(self, pixels: np.ndarray, first: np.ndarray, count: np.ndarray,
+                    heavy: np.ndarray | None = None):
         """Trace samples first[k] .. first[k] + count[k] - 1 (at the offsets
         set_offsets gave) of the pixels with flat indices `pixels` (j * W +
         i, j from the top row; listed in coherent_order).  A generator: it
         yields after each draw call (the viewer's frames, progress, Ctrl-C)
         and returns the sums (total (n, 4) = sum (L, 1), square (n,) = sum
-        L.L) in the order of `pixels`."""
+        L.L) in the order of `pixels`.
+
+        `heavy` (bool per pixel, None: none) marks the pixels whose samples
+        are costly (the glass): their samples are dealt to entries of at
+        most HEAVY_ENTRY_SAMPLES.  Where few pixels share a count, each one's samples are
+        dealt to several consecutive entries of the list (split_factor; a
+        4x4 block of them is one pixel's samples or a few pixels'), so that
+        the last rounds, a few pixels with many samples each, use every
+        SIMD lane and thread; their sums are added back per pixel."""
         w = self.width
-        lw, lh, runs, slot = self._layout(pixels, count)
+        pixels, first, count = (np.asarray(a, np.int64) for a in (pixels, first, count))
+        parts = self._split(pixels, count, heavy)
+        owner = np.repeat(np.arange(len(pixels)), parts)
+        starts = np.concatenate([[0], np.cumsum(parts)[:-1]])
+        each = count // parts
+        e_pixels = pixels[owner]
+        e_first = first[owner] + (np.arange(len(owner)) - starts[owner]) * each[owner]
+        e_count = each[owner]
+        lw, lh, runs, slot = self._layout(e_pixels, e_count)
         tex, fbo = self._list_target(lw, lh)
         entries = np.full((lh * lw, 4), -1, np.int32)
-        entries[slot] = np.stack([pixels % w, pixels // w, first, count], axis=1)
+        entries[slot] = np.stack([e_pixels % w, e_pixels // w, e_first, e_count], axis=1)
         tex.write(entries.tobytes())               # row 0 of the texture = list row 0
         fbo.use()
         fbo.clear(0.0, 0.0, 0.0, 0.0)
-        self._in_flight = (fbo, slot)
+        self._in_flight = (fbo, slot, starts)
         try:
             # entries in list rows 0 .. r-1: filled[r] (a draw's exact pixel count)
             filled = np.concatenate([[0], np.cumsum(np.bincount(slot // lw, minlength=lh))])
             yield from self._list_draws(tex, fbo, runs, lw, filled)
         finally:
             self._in_flight = None
-        return self._list_sums(fbo, slot)
+        return self._list_sums(fbo, slot, starts)
+
+    def _split(self, pixels: np.ndarray, count: np.ndarray, heavy: np.ndarray | None) -> np.ndarray:
+        """Entries per pixel: split_factor of the pixels taking its count,
+        heavy or not (all groups together, so that the split, and with it
+        every sum, is the same whichever culling variants draw them); all
+        ones when the sampler's `split_entries` is off."""
+        if not self.split_entries or len(pixels) == 0:
+            return np.ones(len(pixels), np.int64)
+        heavy = np.zeros(len(pixels), bool) if heavy is None else np.asarray(heavy, bool)
+        key = count * 2 + heavy
+        uniq, inverse, length = np.unique(key, return_inverse=True, return_counts=True)
+        factor = np.array([split_factor(int(n), int(k // 2), HEAVY_ENTRY_SAMPLES if k % 2 else None)
+                           for k, n in zip(uniq, length)], np.int64)
+        return factor[inverse.ravel()]
 
     def sums_so_far(self) -> np.ndarray | None:
         """Between the yields of add_samples: total (n, 4) = sum (L, 1) of
@@ -1016,8 +1146,8 @@ class AdaptiveSampler:
         reads sums_target on the GPU instead.)"""
         if self._in_flight is None:
             return None
-        fbo, slot = self._in_flight
-        return self._list_sums(fbo, slot, square=False)[0]
+        fbo, slot, starts = self._in_flight
+        return self._list_sums(fbo, slot, starts, square=False)[0]
 
     def sums_target(self):
         """Between the yields of add_samples: (the list target's sums
@@ -1025,19 +1155,23 @@ class AdaptiveSampler:
         texel; the texel index of each of its pixels); None outside it."""
         if self._in_flight is None:
             return None
-        fbo, slot = self._in_flight
+        fbo, slot, starts = self._in_flight
+        if len(starts) != len(slot):
+            return None        # split entries: a pixel's sums lie in several texels (split_entries)
         return fbo.color_attachments[0], slot
 
     @staticmethod
-    def _list_sums(fbo, slot, square: bool = True):
-        """The list targets' sums at the texels `slot`: (total (n, 4),
-        square (n,) or None), float64."""
+    def _list_sums(fbo, slot, starts, square: bool = True):
+        """The list targets' sums at the texels `slot`, added up per pixel
+        (its entries begin at `starts`): (total (n, 4), square (n,) or
+        None), float64."""
         size = fbo.size[0] * fbo.size[1]
         total = np.frombuffer(fbo.read(attachment=0, components=4, dtype="f4"), np.float32).reshape(size, 4)[slot]
+        total = np.add.reduceat(total.astype(np.float64), starts, axis=0) if len(starts) else total.astype(np.float64)
         if not square:
-            return total.astype(np.float64), None
-        sq = np.frombuffer(fbo.read(attachment=1, components=1, dtype="f4"), np.float32)[slot]
-        return total.astype(np.float64), sq.astype(np.float64)
+            return total, None
+        sq = np.frombuffer(fbo.read(attachment=1, components=1, dtype="f4"), np.float32)[slot].astype(np.float64)
+        return total, (np.add.reduceat(sq, starts) if len(starts) else sq)
 
     def _list_draws(self, tex, fbo, runs, lw, filled):
         """add_samples' draw calls, a yield after each."""
@@ -1324,6 +1458,7 @@ class AdaptiveRender:
         sums, obj, rays = yield from self._draws(self.sampler.first_pass((0.5, 0.5)))
         # what a sample of each pixel costs: the rays its centre sample traced
         self._cost = np.maximum(rays, 1).astype(np.float64)
+        self._heavy = rays > HEAVY_RAYS
         self.total[...] = sums.total
         self.square[...] = sums.square
         self.spent += w * h
@@ -1384,7 +1519,7 @@ class AdaptiveRender:
         self._upgrading = (flat, old)
         self.round_traced = 0
         try:
-            tot, sq = yield from self._draws(self.sampler.add_samples(flat, n, more))
+            tot, sq = yield from self._draws(self.sampler.add_samples(flat, n, more, self._heavy.ravel()[flat]))
         finally:
             self._upgrading = None
         sums = Sums(old + tot, square[flat] + sq)

@@ -300,6 +300,9 @@ class Progressive:
         w, h = self.size
         if self.job is None:
             self.job = AdaptiveRender(self.renderer, w, h, self.samples, seed=self.seed)
+            # the display adds a round in flight from one texel per pixel
+            # (round_target): no pixel's samples dealt to several
+            self.job.sampler.split_entries = False
             self._reset_upload()
         job = self.job
         budget = (self.target_ms if budget_ms is None else budget_ms) / 1000.0
