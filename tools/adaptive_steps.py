@@ -7,10 +7,17 @@ With ``--passes``: the first pass and a list pass of 8 samples over the
 pixels whose footprint lies on the checker, with footprint samples and with
 point samples, medians of 10 interleaved runs (after 2 untimed).
 
+With ``--glass``: what a sample costs in a list pass of 8 samples over the
+pixels whose centre sample traced more than HEAVY_RAYS rays (the glass),
+over the others, and in a uniform 8-sample render, per sample and per ray
+(the rays each pixel's centre sample traced), point samples, medians of 6
+runs (after 1 untimed).
+
 Usage (repository root, the project's virtual environment)::
 
     python tools/adaptive_steps.py [SCENE [BUDGET [WxH]]]    # glass-sphere 4 320x180
     python tools/adaptive_steps.py --passes [SCENE]          # 320x180
+    python tools/adaptive_steps.py --glass [SCENE]           # default, 320x180
 """
 import sys
 import time
@@ -57,9 +64,49 @@ def passes(name: str, w: int = 320, h: int = 180) -> None:
     r.release()
 
 
+def glass(name: str, w: int = 320, h: int = 180) -> None:
+    from viewer.adaptive import HEAVY_RAYS, _offsets, image_coherent_order
+
+    ctx = moderngl.create_standalone_context(backend="egl")
+    r = Renderer(ctx, load_scene(name))
+    r.SUBSET_PROGRAMS = 64
+    s = AdaptiveSampler(r, w, h)
+    s.compile()
+    _, _, rays = drain(s.first_pass())
+    s.set_offsets(_offsets(8, bench.RENDER_SEED))
+    cost = rays.ravel().astype(np.int64)
+    order = image_coherent_order(w, h)
+
+    def timed(fn):
+        out = []
+        for _ in range(7):
+            t0 = time.perf_counter()
+            fn()
+            out.append(time.perf_counter() - t0)
+        return float(np.median(out[1:])) * 1e3
+
+    print(f"{name} at {w}x{h}, 8 point samples a pixel")
+    for label, sel in ((f"list pass, glass (> {HEAVY_RAYS} rays)", cost > HEAVY_RAYS),
+                       (f"list pass, the rest (<= {HEAVY_RAYS} rays)", cost <= HEAVY_RAYS)):
+        px = order[sel[order]]
+        n = len(px)
+        ms = timed(lambda: drain(s.add_samples(px, np.ones(n, np.int64), np.full(n, 8, np.int64), cost[px] > HEAVY_RAYS)))
+        print(f"  {label}: {n} pixels, {ms:.1f} ms, {ms * 1e6 / (8 * n):.0f} ns a sample, "
+              f"{ms * 1e6 / (8 * cost[px].sum()):.0f} ns a ray")
+    ms = timed(lambda: r.render(w, h, 8, seed=bench.RENDER_SEED))
+    print(f"  uniform render: {w * h} pixels, {ms:.1f} ms, {ms * 1e6 / (8 * w * h):.0f} ns a sample, "
+          f"{ms * 1e6 / (8 * cost.sum()):.0f} ns a ray; the glass holds "
+          f"{cost[cost > HEAVY_RAYS].sum() / cost.sum():.0%} of the rays")
+    s.release()
+    r.release()
+
+
 def main(argv: list[str]) -> int:
     if argv and argv[0] == "--passes":
         passes(argv[1] if len(argv) > 1 else "glass-sphere")
+        return 0
+    if argv and argv[0] == "--glass":
+        glass(argv[1] if len(argv) > 1 else "default")
         return 0
     name = argv[0] if argv else "glass-sphere"
     budget = int(argv[1]) if len(argv) > 1 else 4
