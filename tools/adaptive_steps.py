@@ -90,7 +90,8 @@ def glass(name: str, w: int = 320, h: int = 180) -> None:
                        (f"list pass, the rest (<= {HEAVY_RAYS} rays)", cost <= HEAVY_RAYS)):
         px = order[sel[order]]
         n = len(px)
-        ms = timed(lambda: drain(s.add_samples(px, np.ones(n, np.int64), np.full(n, 8, np.int64), cost[px] > HEAVY_RAYS)))
+        first, count = np.ones(n, np.int64), np.full(n, 8, np.int64)
+        ms = timed(lambda: drain(s.add_samples(px, first, count, cost[px] > HEAVY_RAYS)))
         print(f"  {label}: {n} pixels, {ms:.1f} ms, {ms * 1e6 / (8 * n):.0f} ns a sample, "
               f"{ms * 1e6 / (8 * cost[px].sum()):.0f} ns a ray")
     ms = timed(lambda: r.render(w, h, 8, seed=bench.RENDER_SEED))
