@@ -425,3 +425,28 @@ def test_reference_falls_back_to_the_gpu(gl, monkeypatch, tmp_path):
     assert cached and np.array_equal(again, img)
     names = [p.name for p in tmp_path.glob("ref-*.npy")]
     assert len(names) == 1 and "-gpu-" in names[0]
+
+
+def test_time_axis_labels_plain_numbers_that_do_not_collide():
+    """bench.ms_axis: a log axis of 15 to 600 ms (bench-opaque's span) is
+    labelled 20, 50, 100, 200 and 500 and nothing else; matplotlib's own
+    labelling put a scientific label on every minor tick there, and they
+    ran into each other (docs/bench-pareto.png before)."""
+    matplotlib = pytest.importorskip("matplotlib")
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from viewer.bench import ms_axis
+
+    fig, ax = plt.subplots()
+    try:
+        ax.plot([15, 600], [1e-2, 1e-3])
+        ms_axis(ax)
+        ax.set_xlim(15, 600)
+        fig.canvas.draw()
+        major = [t.get_text() for t in ax.get_xticklabels() if 15 <= t.get_position()[0] <= 600]
+        minor = [t.get_text() for t in ax.get_xticklabels(minor=True) if t.get_text()]
+    finally:
+        plt.close(fig)
+    assert major == ["20", "50", "100", "200", "500"]
+    assert minor == []

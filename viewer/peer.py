@@ -55,7 +55,7 @@ import time
 
 import numpy as np
 
-from .bench import Timings
+from .bench import Timings, ms_axis
 from .scene import Material, Scene, SceneObject
 
 __all__ = ["PeerError", "PEERS", "reasons", "check_scene", "select_variant", "scene_dict", "MitsubaPeer",
@@ -700,7 +700,7 @@ def _plot(path, series: dict[str, list[Point]], targets, subtitle: str) -> bool:
                             color=colour)
         for e in targets:
             ax.axhline(e, color="#999999", lw=0.5, ls=":")
-        ax.set_xscale("log")
+        ms_axis(ax)
         ax.set_yscale("log")
         ax.set_xlabel("time per image, ms (median, wall clock)" if clock == "wall" else
                       "CPU time per image, ms (median, all threads of the process)")
