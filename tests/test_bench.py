@@ -450,3 +450,14 @@ def test_time_axis_labels_plain_numbers_that_do_not_collide():
         plt.close(fig)
     assert major == ["20", "50", "100", "200", "500"]
     assert minor == []
+
+    fig, ax = plt.subplots()
+    try:                                  # under a decade, with no 1, 2 or 5 in it
+        ax.plot([260, 450], [1e-2, 1e-3])
+        ms_axis(ax)
+        ax.set_xlim(260, 450)
+        fig.canvas.draw()
+        shown = [t.get_text() for t in ax.get_xticklabels() if 260 <= t.get_position()[0] <= 450]
+    finally:
+        plt.close(fig)
+    assert len(shown) >= 2 and all(re.fullmatch(r"\d+", t) for t in shown), shown

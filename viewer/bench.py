@@ -683,9 +683,11 @@ def _group(setting: Setting) -> str:
 
 def ms_axis(ax) -> None:
     """A logarithmic x axis of milliseconds, labelled in plain numbers at
-    1, 2 and 5 of every decade.  (Matplotlib's default labels every minor
-    tick in scientific notation where an axis shows one major tick, and on
-    a span of 15 to 600 ms they ran into each other.)"""
+    1, 2 and 5 of every decade (on a span under a decade with fewer than
+    two of them, the locator falls back to evenly spaced ticks, labelled
+    the same way).  (Matplotlib's default labels every minor tick in
+    scientific notation where an axis shows one major tick, and on a span
+    of 15 to 600 ms they ran into each other.)"""
     from matplotlib.ticker import FuncFormatter, LogLocator
 
     ax.set_xscale("log")
