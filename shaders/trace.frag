@@ -43,7 +43,7 @@ uniform int chunkSize;
 #include "lib/footprint.glsl"
 #endif
 #ifdef ADAPTIVE_FIRST
-layout(location = 2) out vec4 fragFirstHit;     // (t, object index, rays, 0); (INF, -1) for the sky
+layout(location = 2) out vec4 fragFirstHit;     // (t, object index, rays, pixelShare); (INF, -1) for the sky
 layout(location = 3) out vec4 fragFirstChecker; // rgb: firstChecker (exposure applied); a: footprint kind
 layout(location = 4) out vec4 fragChainLeaf;    // chainLeaf
 #endif
@@ -579,7 +579,13 @@ void main() {
     fragMoments = vec4(dot(L, L), 0.0, 0.0, 0.0);
 #endif
 #ifdef ADAPTIVE_FIRST
-    fragFirstHit = vec4(firstT, float(firstObject), float(rayCount), 0.0);
+#ifdef FOOTPRINT_AA
+    // the pixel's closed-form share (-1: none), which the list passes read
+    // back from the footprint mask instead of computing it again
+    fragFirstHit = vec4(firstT, float(firstObject), float(rayCount), pixelShare);
+#else
+    fragFirstHit = vec4(firstT, float(firstObject), float(rayCount), -1.0);
+#endif
     // a: how this pixel's footprint samples take the checker: 2 exactly
     // over the pixel, 1 along their rows, 0 not at all (point samples)
 #ifdef FOOTPRINT_AA

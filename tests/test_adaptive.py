@@ -1357,11 +1357,15 @@ def test_footprint_samples_are_the_checker_box_filtered_over_the_pixel(renderer_
     """AMBIENT_CHECKER at 48x27: the first pass with footprint samples, in
     every pixel whose four corner rays meet the floor (the mask), gives
     (1 - f) FLOOR + f CHECKER with f from exact_checker_share, within 2e-5
-    (float32: measured 2.5e-6), where the closed form applies (at most 16
-    checker corners and 32 lines in the pixel: footprint.glsl's caps); the
-    point samples of the same pixels are off by up to 0.64 there.  The test
-    covers pixels crossed by no line (measured 252), by lines of one axis
-    (317) and of both (330: a checker corner inside)."""
+    (float32: measured 2.5e-6 with at most 16 corners), where the closed
+    form applies (at most MAX_PIXEL_CORNERS checker corners and
+    MAX_PIXEL_LINES lines in the pixel); the point samples of the same
+    pixels are off by up to 0.64 there.  The test covers pixels crossed by
+    no line (measured 252), by lines of one axis (317) and of both (330: a
+    checker corner inside), and toward the horizon pixels with more than
+    16 corners (measured 109, up to 391: the inclusion-exclusion sums
+    hundreds of clipped squares in float32; worst 3.8e-6).  A list pass over the same
+    pixels reads the shares the first pass computed and gives them back."""
     r = renderer_for("ambient-checker", AMBIENT_CHECKER)
     w, h = 48, 27
     sampler = AdaptiveSampler(r, w, h, footprint=True)
@@ -1372,23 +1376,32 @@ def test_footprint_samples_are_the_checker_box_filtered_over_the_pixel(renderer_
         assert 0.5 < mask.mean() < 1.0 and set(np.unique(planes)) == {-1, 0}    # the sky is in view too
         sampler.set_footprint(planes)
         sums, obj, _ = drain(sampler.first_pass())
+        flat = np.flatnonzero(mask)
+        sampler.set_offsets(np.array([[0.5, 0.5], [0.1, 0.9], [0.7, 0.2]]))
+        listed, _ = drain(sampler.add_samples(flat, np.ones(len(flat), np.int64), np.full(len(flat), 2)))
         sampler.set_footprint(None)
         point, _, _ = drain(sampler.first_pass())
     finally:
         sampler.release()
     got = sums.mean[..., 0]
-    kinds = {"none": 0, "one axis": 0, "both": 0}
-    worst = worst_point = 0.0
+    again = np.zeros(w * h)
+    again[flat] = listed[:, 0] / listed[:, 3]
+    again = again.reshape(h, w)
+    kinds = {"none": 0, "one axis": 0, "both": 0, "many": 0}
+    worst = worst_point = worst_list = 0.0
     for j, i in zip(*np.nonzero(mask)):
         f = exact_checker_share(r.scene, w, h, i, j)
         cells = _cells_spanned(r.scene, w, h, i, j)
-        if cells[0] * cells[1] > 16 or cells[0] + cells[1] > 32:
+        if cells[0] * cells[1] > A.MAX_PIXEL_CORNERS or cells[0] + cells[1] > A.MAX_PIXEL_LINES:
             continue                                     # the fallback's (tested below)
-        kinds["none" if cells == (0, 0) else "both" if min(cells) > 0 else "one axis"] += 1
+        kind = "none" if cells == (0, 0) else "both" if min(cells) > 0 else "one axis"
+        kinds["many" if cells[0] * cells[1] > 16 else kind] += 1
         want = (1 - f) * FLOOR + f * CHECKER
         worst = max(worst, abs(got[j, i] - want))
+        worst_list = max(worst_list, abs(again[j, i] - want))
         worst_point = max(worst_point, abs(point.mean[j, i, 0] - want))
     assert worst < 2e-5, worst
+    assert worst_list < 2e-5, worst_list
     assert worst_point > 0.2                             # point samples are not that
     assert min(kinds.values()) >= 20, kinds
 

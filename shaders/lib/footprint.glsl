@@ -1,9 +1,13 @@
 // Footprint samples (viewer/adaptive.py): the checker of a plane
 // box-filtered over a pixel's square, exactly, instead of point-sampled.
 //
-// Texel (i, H - 1 - j) of footprintMask (R32F) holds k + 1 where the four
-// corner rays of pixel (i, j) meet checkered plane k first, -(e + 1) where
-// the pixel has chain footprint e (below), 0 for point samples.
+// Texel (i, H - 1 - j) of footprintMask (RG32F) holds in r k + 1 where the
+// four corner rays of pixel (i, j) meet checkered plane k first, -(e + 1)
+// where the pixel has chain footprint e (below), 0 for point samples; in g
+// the pixel's share (pixelCoverage) as the first pass found it, -1 where
+// the closed form is out of reach or before the first pass.  The first
+// pass computes the shares and reports them (trace.frag); the list passes
+// (FOOTPRINT_SHARES) read them from g.
 // The directions that meet a plane form a convex set, so every ray through
 // the pixel's square meets plane k, unless another object pokes in between
 // the corners (a sample that meets that object first stays a point sample).
@@ -32,10 +36,11 @@
 // (fpX . w) / (fpW . w) ((fpZ . w) / (fpW . w)), w = (u, v, 1), camera-relative,
 // with fpW . w > 0 over the square.
 //
-// Cost: the shares are computed once per pixel (setFootprintPixel) and
-// once per sample only where the closed form is out of reach (the row
-// fallback).  On a SIMD rasteriser every lane runs every branch, so each
-// loop's trip count is 0 in the lanes that do not need it.
+// Cost: the shares are computed once per pixel, in the first pass
+// (setFootprintPixel; the list passes read them back), and once per sample
+// only where the closed form is out of reach (the row fallback).  On a
+// SIMD rasteriser every lane runs every branch, so each loop's trip count
+// is 0 in the lanes that do not need it.
 
 uniform sampler2D footprintMask;
 // Chain footprint e at texels (3 (e % chainEntriesPerRow) + r, e /
@@ -52,10 +57,13 @@ vec3 fpX, fpZ, fpW;           // the rows (see above)
 float fpTol2 = INF;           // a chain sample's largest squared distance from the homography's point
 vec2 fpOffset;                // this sample's (u, v)
 
-// More products of crossing lines than this (checker corners inside the
-// pixel), or more lines: no closed form; the sample's row is integrated.
-#define MAX_PIXEL_CORNERS 16
-#define MAX_PIXEL_LINES 32
+// More products of crossing lines than MAX_PIXEL_CORNERS (checker corners
+// inside the pixel), or more lines than MAX_PIXEL_LINES: no closed form;
+// the sample's row is integrated.  Both come from viewer/adaptive.py (the
+// footprint variants' defines), where the reasons for their values are.
+#if !defined(MAX_PIXEL_CORNERS) || !defined(MAX_PIXEL_LINES)
+#error "FOOTPRINT_AA needs MAX_PIXEL_CORNERS and MAX_PIXEL_LINES (viewer/adaptive.py)"
+#endif
 // More lines than this along one row: a point sample (a checker that fine
 // is where the plane meets the horizon).
 #define MAX_ROW_CROSSINGS 24
@@ -232,7 +240,8 @@ float rowCoverage(int k, float v, bool need) {
 // Once per pixel (i, j): its plane, its square's rows and the closed form.
 void setFootprintPixel(vec2 ij) {
     int row = int(imageSize.y - 1.0 - ij.y);
-    float code = texelFetch(footprintMask, ivec2(ij.x, row), 0).r;
+    vec4 texel = texelFetch(footprintMask, ivec2(ij.x, row), 0);
+    float code = texel.r;
     footprintObject = code > 0.5 ? int(code + 0.5) - 1 : -1;
     footprintChainId = 0.0;
     fpTol2 = INF;
@@ -259,7 +268,14 @@ void setFootprintPixel(vec2 ij) {
         fpX = t0.xyz; fpZ = t1.xyz; fpW = t2.xyz;
         fpTol2 = t2.w;
     }
+#ifdef FOOTPRINT_SHARES
+    // the share the first pass computed for this pixel (-1: none; read,
+    // not recomputed: the closed form's loops run up to MAX_PIXEL_CORNERS
+    // times, once per pixel in the first pass instead of once per entry)
+    pixelShare = footprintObject >= 0 ? texel.g : -1.0;
+#else
     pixelShare = pixelCoverage(footprintObject);
+#endif
 }
 
 // Once per sample at `offset`: the share its camera ray takes on the plane.
