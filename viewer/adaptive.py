@@ -67,7 +67,9 @@ picture inside glass); a flat region is exact with one centred sample.  So:
 4. The budget is samples x W x H rays in all (the corner rays included),
    one pixel taking at most MAX_SPP_FACTOR x samples (its last upgrade
    goes to that cap where a doubling would pass it); the render stops when
-   it is spent or no pixel is above the target.  Below 3 samples per pixel
+   it is spent (or all but TAIL_SHARE of it: a last round of a few hundred
+   samples costs more than it brings) or no pixel is above the target.
+   Below 3 samples per pixel
    the corner rays would take most of the budget: there the 3x3
    neighbourhood of centres says where edges may be (and no footprint
    samples are taken).
@@ -201,6 +203,13 @@ MAX_PIXEL_LINES = 100
 #: a pass over the pixel list and its bookkeeping).
 ROUND_SHARE = 0.5
 MIN_ROUND = 0.05
+#: No round starts once the budget left is below this share of the whole:
+#: the last rounds of a render that spends its budget trace a few hundred
+#: samples each (the default scene at 320x180, budget 7: 984, 176 and 24 of
+#: 403,200) and cost a pass over a pixel list and its bookkeeping each
+#: (measured, interleaved: 3-4% of the render's time; RMSE 2.011e-3 ->
+#: 2.017e-3).
+TAIL_SHARE = 0.01
 
 
 @dataclass
@@ -1551,6 +1560,8 @@ class AdaptiveRender:
             error = with_neighbours(self._own)       # estimated_error, own part kept up to date
             want = self._room & (error > self.target_error)
             left = self.budget - self.spent
+            if left < TAIL_SHARE * self.budget:
+                break
             chosen = choose_by_gain(want, error, self._count, left, ROUND_SHARE, MIN_ROUND * self.budget, self._cost)
             if not chosen.any():
                 break
