@@ -20,7 +20,7 @@ samples (seed 1), cached in the output folder:
 Usage (from the repository root, the project's virtual environment)::
 
     python tools/adaptive_vs_uniform.py ref default glass-sphere    # references: 20 + 10 min on 2 cores
-    python tools/adaptive_vs_uniform.py time default glass-sphere   # the table: about 2 min
+    python tools/adaptive_vs_uniform.py time default glass-sphere   # the table: about 4 min
 
 The references are computed one scene at a time per process (run two
 processes for two cores).  ``time`` writes ``adaptive-vs-uniform.json``.
@@ -42,9 +42,13 @@ from viewer.scene import load_scene
 W, H = 320, 180
 REFERENCE_SAMPLES = 512
 OUT = Path("bench-results/adaptive")
+# (kind, samples); "adaptive@E": adaptive with target error E instead of
+# the default (a budget that is not a whole number of samples per pixel:
+# the render stops where every pixel's estimate is below E)
 SETTINGS = [("uniform", 16), ("uniform", 32), ("uniform", 64),
-            ("adaptive", 4), ("adaptive", 6), ("adaptive", 7), ("adaptive", 8), ("adaptive", 12), ("adaptive", 16),
-            ("adaptive", 24), ("adaptive", 32),
+            ("adaptive", 4), ("adaptive@0.004", 4), ("adaptive@0.006", 4),
+            ("adaptive", 5), ("adaptive", 6), ("adaptive@0.003", 6), ("adaptive", 7), ("adaptive", 8),
+            ("adaptive", 12), ("adaptive", 16), ("adaptive", 24), ("adaptive", 32),
             ("adaptive-point", 8), ("adaptive-point", 16), ("adaptive-point", 24), ("adaptive-point", 32)]
 REPEAT = 5
 
@@ -83,7 +87,7 @@ def references(names: list[str]) -> None:
 def measure(names: list[str]) -> None:
     import moderngl
 
-    from viewer.adaptive import AdaptiveSampler, render_adaptive
+    from viewer.adaptive import DEFAULT_TARGET_ERROR, AdaptiveSampler, render_adaptive
     from viewer.renderer import Renderer
 
     ctx = moderngl.create_standalone_context(backend="egl")
@@ -103,7 +107,9 @@ def measure(names: list[str]) -> None:
         def run(kind, n):
             if kind == "uniform":
                 return r.render(W, H, n, seed=bench.RENDER_SEED), float(n), float(n)
-            res = render_adaptive(r, W, H, n, seed=bench.RENDER_SEED, footprint=False if kind == "adaptive-point" else None)
+            target = float(kind.split("@")[1]) if "@" in kind else DEFAULT_TARGET_ERROR
+            res = render_adaptive(r, W, H, n, target_error=target, seed=bench.RENDER_SEED,
+                                  footprint=False if kind == "adaptive-point" else None)
             return res.image, res.mean_spp, res.rays / (W * H)
 
         info = {}

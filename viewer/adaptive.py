@@ -874,6 +874,7 @@ class AdaptiveSampler:
         #: are the ones compile() makes)
         self.footprint = bool(footprint)
         self._footprint_tex = None           # the mask set_footprint gave (None: point samples)
+        self._footprint_texels = None        # its texels (H, W, 2): code, the first pass's share
         self._chain_tex = None               # its chain footprints (zeros: none)
         self.ctx: moderngl.Context = renderer.ctx
         self.width, self.height = width, height
