@@ -77,9 +77,10 @@ picture inside glass); a flat region is exact with one centred sample.  So:
 Measured (README, "Adaptive anti-aliasing"; tools/adaptive_vs_uniform.py):
 against a 512-sample float64 reference at 320x180 footprint samples reach
 the error of 64 uniform samples with 4 rays per pixel on glass-sphere (5
-before chain footprints) and 7-8 on the default scene (11 before the
+before chain footprints; 0.74x of it at 4 since the closed form's wider
+limits) and 6 on the default scene (7 before those limits, 11 before the
 flags at glass boundaries whose sides look alike, and the cap's last
-upgrade).  With point samples only, this estimator
+upgrade), in 0.29-0.33x of uniform 64's time.  With point samples only, this estimator
 and the corner rays needed about 26 on glass-sphere, where the
 3x3-neighbourhood flags and an
 even/odd-halves estimate of the first version needed between 32 and 64.
@@ -990,8 +991,8 @@ class AdaptiveSampler:
         return self._labels
 
     #: the channels of the ADAPTIVE_FIRST variants' outputs that are read
-    #: back: (sum L, 1), L.L, (t, object, rays), (checker part, footprint
-    #: kind), chain leaf
+    #: back: (sum L, 1), L.L, (t, object, rays, the pixel's footprint
+    #: share), (checker part, footprint kind), chain leaf
     MRT_CHANNELS = (4, 1, 4, 4, 4)
 
     def _mrt_target(self, size, count: int) -> moderngl.Framebuffer:
