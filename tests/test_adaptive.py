@@ -405,30 +405,52 @@ def test_split_factor_fills_a_short_run_with_whole_parts():
                     assert d == samples
 
 
+def test_entry_samples_scale_with_cost():
+    """A costly pixel's entries hold the largest power of two of samples
+    whose rays stay within ENTRY_RAYS (at least one sample); a cheap one's
+    (HEAVY_RAYS or fewer rays a sample) are not limited (0)."""
+    assert A.ENTRY_RAYS == 32 and A.HEAVY_RAYS == 4           # the values below are for these
+    cost = np.array([1, 4, 4.5, 6, 8, 9, 16, 17, 26, 100])
+    np.testing.assert_array_equal(A.entry_samples(cost), [0, 0, 4, 4, 4, 2, 2, 1, 1, 1])
+
+
 def test_split_entries_give_each_pixel_its_own_sums(renderer_for):
     """add_samples deals a short list's samples to several entries per pixel
     and adds them back: the same sums as one entry per pixel (to float32
     rounding), in the order of the pixels given.  The pixels take different
     counts, so that each is split by its own run's factor; a sum sent to
-    the wrong pixel or a sample traced twice would differ by far more."""
+    the wrong pixel or a sample traced twice would differ by far more.
+    With each pixel's rays per sample given, the costly ones are split
+    further (entry_samples), to the same sums; a mask instead of costs is
+    refused."""
     r = renderer_for("glass-sphere")
     w, h = 48, 27
+    pixels = np.array([5 * w + 7, 13 * w + 24, 13 * w + 25, 20 * w + 30, 2 * w + 40])
+    first = np.array([1, 4, 1, 8, 0])
+    count = np.array([31, 24, 3, 56, 64])
+    cost = np.array([2.0, 6.0, 30.0, 12.0, 1.0])
     got = {}
-    for split in (False, True):
+    for split, rays in ((False, None), (True, None), (True, cost)):
         s = AdaptiveSampler(r, w, h)
         try:
             s.split_entries = split
             s.set_offsets(A._offsets(64, 1))
-            pixels = np.array([5 * w + 7, 13 * w + 24, 13 * w + 25, 20 * w + 30, 2 * w + 40])
-            first = np.array([1, 4, 1, 8, 0])
-            count = np.array([31, 24, 3, 56, 64])
-            got[split] = drain(s.add_samples(pixels, first, count))
+            if rays is not None:
+                parts = s._split(pixels, count, rays)
+                limit = A.entry_samples(rays)
+                assert np.all((limit == 0) | (count // parts <= limit)), (parts, limit)
+                assert np.all(count % parts == 0)
+                with pytest.raises(TypeError):
+                    s._split(pixels, count, rays > 4)
+            got[split, rays is not None] = drain(s.add_samples(pixels, first, count, rays))
         finally:
             s.release()
-    (t0, q0), (t1, q1) = got[False], got[True]
-    np.testing.assert_array_equal(t1[:, 3], count)
-    np.testing.assert_allclose(t1, t0, rtol=1e-6)
-    np.testing.assert_allclose(q1, q0, rtol=1e-6)
+    t0, q0 = got[False, False]
+    for key in ((True, False), (True, True)):
+        t1, q1 = got[key]
+        np.testing.assert_array_equal(t1[:, 3], count)
+        np.testing.assert_allclose(t1, t0, rtol=1e-6)
+        np.testing.assert_allclose(q1, q0, rtol=1e-6)
     assert np.ptp(t0[:, 0] / t0[:, 3]) > 1e-3           # the pixels differ: a mix-up would show
 
 

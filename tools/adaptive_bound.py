@@ -117,7 +117,7 @@ class ReplaySampler:
         if not np.array_equal(offsets, self.rec.offsets[:len(offsets)]):
             raise ValueError("the replay was recorded with other sample offsets")
 
-    def add_samples(self, pixels, first, count, heavy=None):
+    def add_samples(self, pixels, first, count, cost=None):
         rows = self.rec.row[pixels]
         if (rows < 0).any() or (first + count > self.rec.record).any():
             raise ValueError("a sample that was not recorded")

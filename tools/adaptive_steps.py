@@ -91,7 +91,7 @@ def glass(name: str, w: int = 320, h: int = 180) -> None:
         px = order[sel[order]]
         n = len(px)
         first, count = np.ones(n, np.int64), np.full(n, 8, np.int64)
-        ms = timed(lambda: drain(s.add_samples(px, first, count, cost[px] > HEAVY_RAYS)))
+        ms = timed(lambda: drain(s.add_samples(px, first, count, cost[px])))
         print(f"  {label}: {n} pixels, {ms:.1f} ms, {ms * 1e6 / (8 * n):.0f} ns a sample, "
               f"{ms * 1e6 / (8 * cost[px].sum()):.0f} ns a ray")
     ms = timed(lambda: r.render(w, h, 8, seed=bench.RENDER_SEED))

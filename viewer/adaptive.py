@@ -819,18 +819,35 @@ def run_slots(count: int, list_width: int, bands: int) -> np.ndarray:
 #: up to one sample each: a few pixels with many samples would otherwise fill
 #: a few SIMD lanes of one thread.
 MIN_RUN_ENTRIES = 512
-#: The most samples one entry of a heavy pixel traces (add_samples' `heavy`:
-#: where a sample traces more than HEAVY_RAYS rays, the glass).  The lanes
-#: of a SIMD block run each ray tree in step, as long as the longest; more
-#: entries of one pixel in a block are more alike trees.  Measured
-#: (default scene, 320x180, its 10765 pixels that trace more than 4 rays, 16
-#: samples each, footprint samples on): 436 ms as one entry a pixel, 379 /
-#: 330 / 344 / 354 ms at 8 / 4 / 2 / 1 samples an entry.  Not for the
-#: cheap pixels: every pixel at one sample an entry took 731 ms against
-#: 518 (the entry's own work, a footprint's closed form among it, is no
-#: longer small beside a sample of the floor).
-HEAVY_ENTRY_SAMPLES = 4
+#: The most samples one entry of a costly pixel traces (add_samples'
+#: `cost`: where a sample traces more than HEAVY_RAYS rays, the glass): the
+#: power of two nearest under ENTRY_RAYS / its rays per sample, at least 1.
+#: The lanes of a SIMD block run each ray tree in step, as long as the
+#: longest; more entries of one pixel in a block are more alike trees, and
+#: a short list keeps every thread busy.  Measured, entries of at most 4
+#: samples for every costly pixel (the rule before): a list pass over the
+#: default scene's 10765 glass pixels, 16 samples each, took 436 ms as one
+#: entry a pixel, 379 / 330 / 344 / 354 ms at 8 / 4 / 2 / 1 samples an
+#: entry; but whole adaptive renders (320x180, 7 interleaved runs each,
+#: CPU time) took 10-12% less at 2 or 1 on the default scene (26 rays a
+#: glass sample), and 4-7% more on glass-sphere (6 rays a sphere sample),
+#: hence a size by cost: 1 sample an entry on the default scene's glass, 4
+#: on glass-sphere's sphere.  Not for the cheap pixels: every pixel at one
+#: sample an entry took 731 ms against 518 (the entry's own work, a
+#: footprint's closed form among it, is no longer small beside a sample of
+#: the floor).
+ENTRY_RAYS = 32
 HEAVY_RAYS = 4
+
+
+def entry_samples(cost: np.ndarray) -> np.ndarray:
+    """The most samples one entry of each pixel traces (0: no limit), from
+    its rays per sample `cost`: for a pixel above HEAVY_RAYS, the largest
+    power of two at most ENTRY_RAYS / cost, and at least 1."""
+    cost = np.asarray(cost, np.float64)
+    with np.errstate(divide="ignore"):
+        most = np.exp2(np.floor(np.log2(np.maximum(ENTRY_RAYS / np.maximum(cost, 1e-9), 1.0))))
+    return np.where(cost > HEAVY_RAYS, most, 0).astype(np.int64)
 
 
 def split_factor(length: int, samples: int, most: int | None = None) -> int:
@@ -1143,7 +1160,7 @@ class AdaptiveSampler:
         return lw, max(height, 1), runs, slot
 
     def add_samples(self, pixels: np.ndarray, first: np.ndarray, count: np.ndarray,
-                    heavy: np.ndarray | None = None):
+                    cost: np.ndarray | None = None):
         """Trace samples first[k] .. first[k] + count[k] - 1 (at the offsets
         set_offsets gave) of the pixels with flat indices `pixels` (j * W +
         i, j from the top row; listed in coherent_order).  A generator: it
@@ -1151,16 +1168,17 @@ class AdaptiveSampler:
         and returns the sums (total (n, 4) = sum (L, 1), square (n,) = sum
         L.L) in the order of `pixels`.
 
-        `heavy` (bool per pixel, None: none) marks the pixels whose samples
-        are costly (the glass): their samples are dealt to entries of at
-        most HEAVY_ENTRY_SAMPLES.  Where few pixels share a count, each one's samples are
+        `cost` (rays per sample per pixel, None: all cheap) marks the
+        pixels whose samples are costly (the glass): their samples are
+        dealt to entries of at most entry_samples(cost) samples.  Where few
+        pixels share a count, each one's samples are
         dealt to several consecutive entries of the list (split_factor; a
         4x4 block of them is one pixel's samples or a few pixels'), so that
         the last rounds, a few pixels with many samples each, use every
         SIMD lane and thread; their sums are added back per pixel."""
         w = self.width
         pixels, first, count = (np.asarray(a, np.int64) for a in (pixels, first, count))
-        parts = self._split(pixels, count, heavy)
+        parts = self._split(pixels, count, cost)
         owner = np.repeat(np.arange(len(pixels)), parts)
         starts = np.concatenate([[0], np.cumsum(parts)[:-1]])
         each = count // parts
@@ -1183,17 +1201,20 @@ class AdaptiveSampler:
             self._in_flight = None
         return self._list_sums(fbo, slot, starts)
 
-    def _split(self, pixels: np.ndarray, count: np.ndarray, heavy: np.ndarray | None) -> np.ndarray:
-        """Entries per pixel: split_factor of the pixels taking its count,
-        heavy or not (all groups together, so that the split, and with it
-        every sum, is the same whichever culling variants draw them); all
-        ones when the sampler's `split_entries` is off."""
+    def _split(self, pixels: np.ndarray, count: np.ndarray, cost: np.ndarray | None) -> np.ndarray:
+        """Entries per pixel: split_factor of the pixels taking its count
+        with its entry_samples limit (all groups together, so that the
+        split, and with it every sum, is the same whichever culling variants
+        draw them); all ones when the sampler's `split_entries` is off."""
         if not self.split_entries or len(pixels) == 0:
             return np.ones(len(pixels), np.int64)
-        heavy = np.zeros(len(pixels), bool) if heavy is None else np.asarray(heavy, bool)
-        key = count * 2 + heavy
+        if cost is not None and np.asarray(cost).dtype.kind == "b":
+            raise TypeError("add_samples takes each pixel's rays per sample, not a mask")
+        most = np.zeros(len(pixels), np.int64) if cost is None else entry_samples(cost)
+        span = int(most.max()) + 1
+        key = count * span + most
         uniq, inverse, length = np.unique(key, return_inverse=True, return_counts=True)
-        factor = np.array([split_factor(int(n), int(k // 2), HEAVY_ENTRY_SAMPLES if k % 2 else None)
+        factor = np.array([split_factor(int(n), int(k // span), int(k % span) or None)
                            for k, n in zip(uniq, length)], np.int64)
         return factor[inverse.ravel()]
 
@@ -1520,7 +1541,6 @@ class AdaptiveRender:
         sums, obj, rays = yield from self._draws(self.sampler.first_pass((0.5, 0.5)))
         # what a sample of each pixel costs: the rays its centre sample traced
         self._cost = np.maximum(rays, 1).astype(np.float64)
-        self._heavy = rays > HEAVY_RAYS
         self.total[...] = sums.total
         self.square[...] = sums.square
         self.spent += w * h
@@ -1583,7 +1603,7 @@ class AdaptiveRender:
         self._upgrading = (flat, old)
         self.round_traced = 0
         try:
-            tot, sq = yield from self._draws(self.sampler.add_samples(flat, n, more, self._heavy.ravel()[flat]))
+            tot, sq = yield from self._draws(self.sampler.add_samples(flat, n, more, self._cost.ravel()[flat]))
         finally:
             self._upgrading = None
         sums = Sums(old + tot, square[flat] + sq)
