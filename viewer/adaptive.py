@@ -845,8 +845,7 @@ def entry_samples(cost: np.ndarray) -> np.ndarray:
     its rays per sample `cost`: for a pixel above HEAVY_RAYS, the largest
     power of two at most ENTRY_RAYS / cost, and at least 1."""
     cost = np.asarray(cost, np.float64)
-    with np.errstate(divide="ignore"):
-        most = np.exp2(np.floor(np.log2(np.maximum(ENTRY_RAYS / np.maximum(cost, 1e-9), 1.0))))
+    most = np.exp2(np.floor(np.log2(np.maximum(ENTRY_RAYS / np.maximum(cost, 1.0), 1.0))))
     return np.where(cost > HEAVY_RAYS, most, 0).astype(np.int64)
 
 
@@ -878,10 +877,9 @@ class AdaptiveSampler:
     #: the first and list passes' defines with footprint samples (trace.frag):
     #: the closed form's limits, and in the list passes the shares the first
     #: pass computed (read from the footprint mask, not computed per entry)
-    FOOTPRINT_FIRST = {**FIRST, "FOOTPRINT_AA": 1,
-                       "MAX_PIXEL_CORNERS": MAX_PIXEL_CORNERS, "MAX_PIXEL_LINES": MAX_PIXEL_LINES}
-    FOOTPRINT_LIST = {**LIST, "FOOTPRINT_AA": 1, "FOOTPRINT_SHARES": 1,
-                      "MAX_PIXEL_CORNERS": MAX_PIXEL_CORNERS, "MAX_PIXEL_LINES": MAX_PIXEL_LINES}
+    FOOTPRINT = {"FOOTPRINT_AA": 1, "MAX_PIXEL_CORNERS": MAX_PIXEL_CORNERS, "MAX_PIXEL_LINES": MAX_PIXEL_LINES}
+    FOOTPRINT_FIRST = {**FIRST, **FOOTPRINT}
+    FOOTPRINT_LIST = {**LIST, **FOOTPRINT, "FOOTPRINT_SHARES": 1}
     #: the texture units of the footprint mask and of the chain footprints
     FOOTPRINT_UNIT = 3
     FOOTPRINT_CHAIN_UNIT = 4
