@@ -461,3 +461,15 @@ def test_time_axis_labels_plain_numbers_that_do_not_collide():
     finally:
         plt.close(fig)
     assert len(shown) >= 2 and all(re.fullmatch(r"\d+", t) for t in shown), shown
+
+    fig, ax = plt.subplots(figsize=(6, 4))
+    try:                                  # the peer comparison's span: 10 ms to 40 s
+        ax.plot([9, 45000], [1e-1, 1e-3])
+        ms_axis(ax)
+        fig.canvas.draw()
+        shown = [t.get_text() for t in ax.get_xticklabels() if 9 <= t.get_position()[0] <= 45000]
+        minor = [t.get_text() for t in ax.get_xticklabels(minor=True) if t.get_text()]
+    finally:
+        plt.close(fig)
+    assert shown == ["10", "30", "100", "300", "1000", "3000", "10000", "30000"], shown
+    assert minor == []

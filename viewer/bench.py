@@ -33,7 +33,12 @@ converged float64 reference image:
   reference's sample positions beyond the always-centred first one), max
   depth 16 and min weight 1e-4 (deeper than any setting swept; going to depth
   32 / 1e-6 changes the default scene's reference by 4e-4 RMSE, well under
-  the reference's own sampling noise of about 3e-3 at 128 samples).  Reference images are cached in the
+  the reference's own sampling noise of about 3e-3 at 128 samples).  With
+  ``--reference-refine N`` the pixels whose samples disagree (edges, a
+  checker finer than the pixel) take N samples instead
+  (``viewer.reference.render_reference_refined``; the peer comparison's
+  default, as its renderers get below the plain reference's own error).
+  Reference images are cached in the
   output folder, keyed by scene content, size, samples and the reference
   tracer's source.  Metrics: RMSE over all pixels and channels in linear
   space, the fraction of pixels with a channel more than 1/255 off in
@@ -86,6 +91,9 @@ RENDER_SEED = 0
 REFERENCE_SEED = 1
 REFERENCE_MAX_DEPTH = 16
 REFERENCE_MIN_WEIGHT = 1e-4
+#: --reference-refine: a pixel whose reference samples all lie within this
+#: (linear, after the exposure) keeps them; any other takes the refined count
+REFINE_TOLERANCE = 2.5e-4
 
 DEFAULT_TIME_TOLERANCE = 0.05
 #: RMSEs closer than this (relative) are one error.  Two settings that
@@ -299,6 +307,14 @@ def _scene_digest(scene) -> str:
     return h.hexdigest()[:12]
 
 
+def usable_cpus() -> int:
+    """The CPUs this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        return os.cpu_count() or 1
+
+
 def reference_kind() -> str:
     """"float64" when viewer.reference is importable, else "gpu" (fallback)."""
     try:
@@ -309,12 +325,17 @@ def reference_kind() -> str:
 
 
 def reference_image(scene, stem: str, width: int, height: int, samples: int, cache_dir: Path | None,
-                    ctx=None, log=None) -> tuple[np.ndarray, str, bool]:
+                    ctx=None, log=None, refine: int = 0) -> tuple[np.ndarray, str, bool]:
     """The converged reference image (H, W, 3) float64, its kind ("float64" or
-    "gpu") and whether it came from the cache."""
+    "gpu") and whether it came from the cache.  ``refine`` > ``samples``:
+    pixels whose samples disagree by more than REFINE_TOLERANCE take
+    ``refine`` samples (:func:`viewer.reference.render_reference_refined`;
+    float64 only)."""
     kind = reference_kind()
     ref_scene = _reference_scene(scene)
-    name = (f"ref-{stem}-{_scene_digest(ref_scene)}-{width}x{height}-s{samples}-seed{REFERENCE_SEED}"
+    refine = int(refine) if kind == "float64" and int(refine) > samples else 0
+    spp = f"s{samples}" + (f"r{refine}t{REFINE_TOLERANCE:g}" if refine else "")
+    name = (f"ref-{stem}-{_scene_digest(ref_scene)}-{width}x{height}-{spp}-seed{REFERENCE_SEED}"
             f"-d{REFERENCE_MAX_DEPTH}-w{REFERENCE_MIN_WEIGHT:g}-{kind}-{_reference_source_digest()}.npy")
     path = cache_dir / name if cache_dir is not None else None
     if path is not None and path.is_file():
@@ -325,7 +346,14 @@ def reference_image(scene, stem: str, width: int, height: int, samples: int, cac
         except (OSError, ValueError):
             pass
     t0 = time.perf_counter()
-    if kind == "float64":
+    if kind == "float64" and refine:
+        from . import interrupt
+        from .reference import render_reference_refined
+
+        img, _ = render_reference_refined(ref_scene, width, height, samples, refine, REFINE_TOLERANCE,
+                                          seed=REFERENCE_SEED, workers=usable_cpus(), log=log,
+                                          check=interrupt.check)
+    elif kind == "float64":
         from . import interrupt
         from .reference import camera_rays, trace
         from .sampling import sample_offsets
@@ -530,10 +558,7 @@ def machine_info(ctx=None, backend: str | None = None) -> dict:
                     break
     except OSError:
         pass
-    try:
-        cpus_usable = len(os.sched_getaffinity(0))
-    except (AttributeError, OSError):
-        cpus_usable = os.cpu_count()
+    cpus_usable = usable_cpus()
     info = {
         "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
         "platform": platform.platform(),
@@ -687,12 +712,20 @@ def ms_axis(ax) -> None:
     two of them, the locator falls back to evenly spaced ticks, labelled
     the same way).  (Matplotlib's default labels every minor tick in
     scientific notation where an axis shows one major tick, and on a span
-    of 15 to 600 ms they ran into each other.)"""
+    of 15 to 600 ms they ran into each other.)  Over more than three
+    decades of data (the peer comparison: 10 ms to 40 s) only 1 and 3 are
+    labelled: "5000 10000 20000" ran together.  Call it after plotting."""
+    import math
+
     from matplotlib.ticker import FuncFormatter, LogLocator
 
     ax.set_xscale("log")
-    ax.xaxis.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
-    ax.xaxis.set_minor_locator(LogLocator(base=10, subs=(3.0, 4.0, 6.0, 7.0, 8.0, 9.0)))
+    lo, hi = ax.dataLim.intervalx
+    wide = lo > 0 and math.isfinite(hi) and math.log10(hi / lo) > 3.0
+    labelled = (1.0, 3.0) if wide else (1.0, 2.0, 5.0)
+    ax.xaxis.set_major_locator(LogLocator(base=10, subs=labelled))
+    ax.xaxis.set_minor_locator(LogLocator(base=10, subs=tuple(float(k) for k in range(2, 10)
+                                                              if float(k) not in labelled)))
     ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
     ax.xaxis.set_minor_formatter(FuncFormatter(lambda v, _: ""))
 
@@ -812,14 +845,14 @@ def plot(path: Path, by_scene: dict[str, list[Result]], titles: dict[str, str], 
 # ---------------------------------------------------------------- command line
 
 
-def _positive(hi: int):
+def _positive(hi: int, lo: int = 1):
     def parse(text: str) -> int:
         try:
             v = int(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
-        if not 1 <= v <= hi:
-            raise argparse.ArgumentTypeError(f"expected an integer in 1..{hi}, got {v}")
+        if not lo <= v <= hi:
+            raise argparse.ArgumentTypeError(f"expected an integer in {lo}..{hi}, got {v}")
         return v
     return parse
 
@@ -848,6 +881,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--reference-samples", type=_positive(65536), default=None, metavar="N",
                    help=f"samples per pixel of the reference ({DEFAULT_REFERENCE_SAMPLES}; "
                         f"{QUICK_REFERENCE_SAMPLES} with --quick)")
+    p.add_argument("--reference-refine", type=_positive(1 << 20, lo=0), default=None, metavar="N",
+                   help="samples per pixel of the reference where its samples disagree by more than "
+                        f"{REFINE_TOLERANCE:g} (edges, a checker finer than the pixel); 0, or at most "
+                        "--reference-samples: none (default: none for the sweep, "
+                        "8192 with --peer, none with --peer --quick)")
     p.add_argument("--quick", action="store_true",
                    help="a tiny sweep (eight settings per scene, one of them adaptive), for tests")
     p.add_argument("--out", default="bench-results", metavar="DIR",
@@ -992,7 +1030,8 @@ def _run(args, ctx, backend, scenes, width, height, ref_samples, out: Path) -> i
             _log(f"{stem}: too large for the generic shader: its setting is left out")
         _log(f"{stem}: reference {width}x{height}, {ref_samples} samples ...")
         t0 = time.perf_counter()
-        ref, _, cached = reference_image(scene, stem, width, height, ref_samples, out, ctx=ctx, log=_log)
+        ref, _, cached = reference_image(scene, stem, width, height, ref_samples, out, ctx=ctx, log=_log,
+                                         refine=args.reference_refine or 0)
         _log(f"{stem}: reference {'from the cache' if cached else f'took {time.perf_counter() - t0:.1f} s'}")
         _log(f"{stem}: {len(settings)} settings, warm-up and {args.repeat} rounds ...")
         t0 = time.perf_counter()

@@ -465,10 +465,9 @@ def scene_dict(scene: Scene, width: int, height: int, *, max_depth: int | None =
 
 
 def _cores() -> int:
-    try:
-        return len(os.sched_getaffinity(0))
-    except (AttributeError, OSError):
-        return os.cpu_count() or 1
+    from .bench import usable_cpus
+
+    return usable_cpus()
 
 
 class MitsubaPeer:
@@ -530,16 +529,23 @@ def peer_info(peer: MitsubaPeer | None = None) -> dict:
 
 PEER_DEFAULT_SCENE = "whitted-exact"
 PEER_REFERENCE_SAMPLES = 512
+#: ... and 8192 in the pixels where those disagree (about a third of
+#: whitted-exact's at 320x180): 512 everywhere left the reference off by
+#: RMSE 0.0027 itself, which is what the renderers reach at 256-512
+#: samples, so lower errors could not be measured (see
+#: viewer.reference.render_reference_refined)
+PEER_REFERENCE_REFINE = 8192
 PEER_QUICK_REFERENCE_SAMPLES = 16
-GLASSRAY_SPP = (1, 2, 4, 8, 16, 32, 64)
-MITSUBA_SPP = (1, 2, 4, 8, 16, 32, 64, 128, 256)
+GLASSRAY_SPP = (1, 2, 4, 8, 16, 32, 64, 128, 256)
+MITSUBA_SPP = (1, 2, 4, 8, 16, 32, 64, 128, 256, 512, 1024, 2048, 4096)
 #: The adaptive series: `render --adaptive --samples N` at the default
 #: target error, N = each of these budgets (mean rays per pixel).
-ADAPTIVE_BUDGETS = (4, 8, 16, 32, 64)
+ADAPTIVE_BUDGETS = (4, 8, 16, 32, 64, 128)     # ≤256 stops where ≤128 does (the target)
 QUICK_GLASSRAY_SPP = (1, 2, 4)
 QUICK_MITSUBA_SPP = (1, 2, 4, 8)
 QUICK_ADAPTIVE_BUDGETS = (4, 8)
-TARGET_ERRORS = (0.1, 0.07, 0.05, 0.04, 0.03, 0.025, 0.02, 0.015, 0.01, 0.007, 0.005)
+TARGET_ERRORS = (0.1, 0.07, 0.05, 0.04, 0.03, 0.025, 0.02, 0.015, 0.01, 0.007, 0.005, 0.004, 0.003,
+                 0.002, 0.0015)
 #: A Mitsuba point whose warm-up render took longer than this (seconds) ends
 #: its series: the next sample count would take about twice as long.
 PEER_TIME_LIMIT_S = 30.0
@@ -735,6 +741,8 @@ def run_bench(args, ctx, backend: str, name: str, scene, width: int, height: int
     quick = bool(getattr(args, "quick", False))
     repeat = int(args.repeat)
     ref_samples = args.reference_samples or (PEER_QUICK_REFERENCE_SAMPLES if quick else PEER_REFERENCE_SAMPLES)
+    refine = getattr(args, "reference_refine", None)
+    refine = (0 if quick else PEER_REFERENCE_REFINE) if refine is None else refine
     g_spp = QUICK_GLASSRAY_SPP if quick else GLASSRAY_SPP
     m_spp = QUICK_MITSUBA_SPP if quick else MITSUBA_SPP
     a_budgets = QUICK_ADAPTIVE_BUDGETS if quick else ADAPTIVE_BUDGETS
@@ -749,9 +757,12 @@ def run_bench(args, ctx, backend: str, name: str, scene, width: int, height: int
     log(f"peer: Mitsuba {info['peer']['mitsuba']} ({peer.variant_note}), {peer.threads} threads, "
         f"sampler {peer.sampler}, path tracer max depth {peer.max_depth}")
 
-    log(f"reference {width}x{height}, {ref_samples} samples ...")
+    refined = refine if bench.reference_kind() == "float64" and refine > ref_samples else 0
+    ref_text = f"{ref_samples} samples" + (f", {refined} where they disagree" if refined else "")
+    log(f"reference {width}x{height}, {ref_text} ...")
     t0 = time.perf_counter()
-    ref, kind, cached = bench.reference_image(scene, stem, width, height, ref_samples, out, ctx=ctx, log=log)
+    ref, kind, cached = bench.reference_image(scene, stem, width, height, ref_samples, out, ctx=ctx, log=log,
+                                              refine=refined)
     log(f"reference {'from the cache' if cached else f'took {time.perf_counter() - t0:.1f} s'}")
 
     from .adaptive import DEFAULT_TARGET_ERROR, render_adaptive
@@ -817,7 +828,8 @@ def run_bench(args, ctx, backend: str, name: str, scene, width: int, height: int
     tte = {clock: _tte_rows(series, TARGET_ERRORS, clock) for clock in ("wall", "cpu")}
     info.update({
         "size": f"{width}x{height}", "scene": stem, "repeat": repeat, "quick": quick,
-        "reference": {"kind": kind, "samples": ref_samples, "seed": bench.REFERENCE_SEED,
+        "reference": {"kind": kind, "samples": ref_samples, "refined_samples": refined,
+                      "refine_tolerance": bench.REFINE_TOLERANCE if refined else None, "seed": bench.REFERENCE_SEED,
                       "max_depth": bench.REFERENCE_MAX_DEPTH, "min_weight": bench.REFERENCE_MIN_WEIGHT},
         "glassray": {"max_depth": scene.render.max_depth, "min_weight": scene.render.min_weight,
                      "sampling": "stratified sub-pixel offsets (viewer.sampling), uniform over the image"},
@@ -839,7 +851,8 @@ def run_bench(args, ctx, backend: str, name: str, scene, width: int, height: int
         f"min weight {scene.render.min_weight:g}, stratified samples",
         f"peer: Mitsuba {info['peer']['mitsuba']} (Dr.Jit {info['peer']['drjit']}), variant {peer.variant_note}, "
         f"{peer.threads} threads, path tracer max depth {peer.max_depth}, {peer.sampler} sampler, box filter",
-        f"error: RMSE (linear) against the float64 reference, {ref_samples} samples (seed {bench.REFERENCE_SEED}), "
+        f"error: RMSE (linear) against the float64 reference, {ref_text}"
+        f"{f' by more than {bench.REFINE_TOLERANCE:g}' if refined else ''} (seed {bench.REFERENCE_SEED}), "
         f"max depth {bench.REFERENCE_MAX_DEPTH}, min weight {bench.REFERENCE_MIN_WEIGHT:g}",
         f"time: median of {repeat} interleaved timed renders after untimed warm-up renders; each render finished "
         "(read back) before the clock stops; time to reach an error: log-log interpolation between measured "
@@ -882,7 +895,8 @@ def run_bench(args, ctx, backend: str, name: str, scene, width: int, height: int
     write_atomic(out / "peer-machine.json", (json.dumps(info, indent=2) + "\n").encode("utf-8"))
     plotted = _plot(out / "peer.png", series, TARGET_ERRORS,
                     f"glassray vs Mitsuba {info['peer']['mitsuba']} ({peer.variant}, {peer.threads} threads), "
-                    f"{stem} {width}x{height}, {info['cpus_usable']} CPUs, reference {ref_samples} spp; "
+                    f"{stem} {width}x{height}, {info['cpus_usable']} CPUs, reference {ref_samples}"
+                    f"{f'/{refined}' if refined else ''} spp; "
                     f"{info['date'][:10]}")
     print(text, end="")
     print()
