@@ -389,6 +389,8 @@ def test_plot_without_matplotlib(monkeypatch, tmp_path):
     (["no-such-scene.toml"], 2, "no-such-scene.toml"),
     (["default", "--scenes", "bench-opaque"], 2, "either SCENE or --scenes"),
     (["--size", "0x5"], 2, "1..16384"),
+    (["--reference-refine", "-1"], 2, "0..1048576"),
+    (["--reference-refine", "many"], 2, "expected an integer, got 'many'"),
 ])
 def test_bench_usage_errors(args, status, text, tmp_path):
     proc = _bench(*args, "--quick", "--out", str(tmp_path / "o"))
@@ -473,3 +475,17 @@ def test_time_axis_labels_plain_numbers_that_do_not_collide():
         plt.close(fig)
     assert shown == ["10", "30", "100", "300", "1000", "3000", "10000", "30000"], shown
     assert minor == []
+
+
+def test_bench_with_a_refined_reference(tmp_path):
+    """--reference-refine N: the reference is cached under its own name and
+    the results say how it was made."""
+    out = tmp_path / "o"
+    proc = _bench("--quick", "--size", "32x18", "--repeat", "1", "bench-opaque", "--reference-refine", "16",
+                  "--out", str(out))
+    assert proc.returncode == 0, proc.stderr
+    names = [p.name for p in out.glob("ref-*.npy")]
+    assert len(names) == 1 and f"-s{bench.QUICK_REFERENCE_SAMPLES}r16t" in names[0], names
+    assert "16 where they disagree by more than" in (out / "results.md").read_text()
+    machine = json.loads((out / "machine.json").read_text())
+    assert machine["reference"]["refined_samples"] == 16

@@ -991,8 +991,12 @@ def _stem(name: str, scene) -> str:
 def _run(args, ctx, backend, scenes, width, height, ref_samples, out: Path) -> int:
     info = machine_info(ctx, backend)
     kind = reference_kind()
+    refine = int(getattr(args, "reference_refine", None) or 0)
+    refine = refine if kind == "float64" and refine > ref_samples else 0
+    ref_text = f"{ref_samples} samples" + (f", {refine} where they disagree by more than {REFINE_TOLERANCE:g}"
+                                           if refine else "")
     info.update({"size": f"{width}x{height}", "repeat": args.repeat, "quick": bool(args.quick),
-                 "reference": {"kind": kind, "samples": ref_samples, "seed": REFERENCE_SEED,
+                 "reference": {"kind": kind, "samples": ref_samples, "refined_samples": refine, "seed": REFERENCE_SEED,
                                "max_depth": REFERENCE_MAX_DEPTH, "min_weight": REFERENCE_MIN_WEIGHT},
                  "render_seed": RENDER_SEED})
     header = [f"glassray bench {info['date']}",
@@ -1002,7 +1006,7 @@ def _run(args, ctx, backend, scenes, width, height, ref_samples, out: Path) -> i
               f"Pareto front of time against RMSE with differences under {100 * args.time_tolerance:g}% in time "
               f"and {100 * args.error_tolerance:g}% in RMSE as ties; front column: ** on both clocks, "
               f"w wall clock only, c CPU time only",
-              (f"reference: float64 NumPy tracer, {ref_samples} samples (seed {REFERENCE_SEED}), "
+              (f"reference: float64 NumPy tracer, {ref_text} (seed {REFERENCE_SEED}), "
                f"max depth {REFERENCE_MAX_DEPTH}, min weight {REFERENCE_MIN_WEIGHT:g}") if kind == "float64" else
               (f"reference: viewer.reference is not importable: FALLBACK to a GPU render with {ref_samples} "
                f"samples (seed {REFERENCE_SEED}), max depth {REFERENCE_MAX_DEPTH}, min weight "
@@ -1028,10 +1032,10 @@ def _run(args, ctx, backend, scenes, width, height, ref_samples, out: Path) -> i
                 or len(scene.lights) > GENERIC_LENS["LIGHTS_LEN"]):
             settings = [s for s in settings if s.specialise]
             _log(f"{stem}: too large for the generic shader: its setting is left out")
-        _log(f"{stem}: reference {width}x{height}, {ref_samples} samples ...")
+        _log(f"{stem}: reference {width}x{height}, {ref_text} ...")
         t0 = time.perf_counter()
         ref, _, cached = reference_image(scene, stem, width, height, ref_samples, out, ctx=ctx, log=_log,
-                                         refine=args.reference_refine or 0)
+                                         refine=refine)
         _log(f"{stem}: reference {'from the cache' if cached else f'took {time.perf_counter() - t0:.1f} s'}")
         _log(f"{stem}: {len(settings)} settings, warm-up and {args.repeat} rounds ...")
         t0 = time.perf_counter()
@@ -1069,7 +1073,7 @@ def _run(args, ctx, backend, scenes, width, height, ref_samples, out: Path) -> i
     write_atomic(out / "results.md", text.encode("utf-8"))
     write_atomic(out / "machine.json", (json.dumps(info, indent=2) + "\n").encode("utf-8"))
     subtitle = (f"glassray bench, {width}x{height}, {info['gl'].split(' / ')[0]}, {info['cpus_usable']} CPUs; "
-                f"reference {ref_samples} spp ({kind}); {info['date'][:10]}")
+                f"reference {ref_samples}{f'/{refine}' if refine else ''} spp ({kind}); {info['date'][:10]}")
     plotted = (plot(out / "pareto.png", by_scene, titles, subtitle + "; wall-clock frame time", "wall")
                and plot(out / "pareto-cpu.png", by_scene, titles, subtitle + "; CPU time of all threads", "cpu"))
 
