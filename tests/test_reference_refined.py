@@ -111,3 +111,42 @@ def test_bench_caches_the_refined_reference_apart(tmp_path):
     # a refined count no larger than the base is no refinement: the plain file
     same, _, cached = bench.reference_image(scene, "whitted-exact", W, H, 8, tmp_path, refine=8)
     assert cached and np.array_equal(same, plain)
+
+
+def _interrupt_myself():
+    import os
+    import signal
+    import time
+
+    os.kill(os.getpid(), signal.SIGINT)
+    time.sleep(0.05)
+    return "still here"
+
+
+def test_workers_leave_ctrl_c_to_the_caller(scene, monkeypatch):
+    """Ctrl-C reaches the whole process group; a worker that took it sent a
+    KeyboardInterrupt back as its task's result and the bench said
+    "interrupted" twice.  Workers ignore it: the caller's check() acts."""
+    import concurrent.futures
+    import multiprocessing
+
+    from viewer import reference
+
+    with concurrent.futures.ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"),
+                                                initializer=reference._ignore_sigint) as pool:
+        try:
+            got = pool.submit(_interrupt_myself).result(timeout=60)
+        except KeyboardInterrupt:     # the worker's, sent back: fail this test, not the session
+            pytest.fail("a worker took Ctrl-C")
+        assert got == "still here"
+
+    made = []
+    real = concurrent.futures.ProcessPoolExecutor
+
+    def recording(*args, **kwargs):
+        made.append(kwargs)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(concurrent.futures, "ProcessPoolExecutor", recording)
+    render_reference_refined(scene, 8, 4, 4, 8, 1e-3, seed=2, workers=2)
+    assert made and made[0].get("initializer") is reference._ignore_sigint

@@ -897,6 +897,16 @@ def _sample_stats(scene: Scene, width: int, height: int, pixels, offsets):
     return total, lo, hi
 
 
+def _ignore_sigint() -> None:
+    """A worker's start: Ctrl-C reaches the whole process group, and only the
+    caller (its ``check``) should act on it; a worker's KeyboardInterrupt
+    came back as the result of its task and stopped the caller a second
+    time (two "interrupted" messages)."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
 def render_reference_refined(scene: Scene, width: int, height: int, samples: int, max_samples: int,
                              tolerance: float, seed: int = 0, workers: int = 1,
                              log=None, check=None) -> tuple[np.ndarray, np.ndarray]:
@@ -936,7 +946,8 @@ def render_reference_refined(scene: Scene, width: int, height: int, samples: int
         import multiprocessing
         from concurrent.futures import ProcessPoolExecutor
 
-        pool = ProcessPoolExecutor(max_workers=int(workers), mp_context=multiprocessing.get_context("spawn"))
+        pool = ProcessPoolExecutor(max_workers=int(workers), mp_context=multiprocessing.get_context("spawn"),
+                                   initializer=_ignore_sigint)
 
     def run(pixels, block, what):
         """(sum, min, max) over ``block`` of the samples of every pixel."""
