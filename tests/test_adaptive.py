@@ -1789,3 +1789,63 @@ def test_no_pixel_seen_through_glass_is_left_off_at_one_sample(renderer_for):
     assert kept_one.sum() > 200          # the glass's flat parts do keep one sample
     err = np.abs(res.image - r.render(w, h, 64, seed=3)).max(axis=-1)[kept_one]
     assert err.max() < 0.01, (np.sort(err)[-5:], kept_one.sum())
+
+
+def test_offscreen_draws_queue_without_finishing_each(renderer_for, monkeypatch):
+    """render_adaptive lets draws queue (sync_draws off: the driver draws
+    while Python prepares the next one) and finishes them at the read-backs
+    or every MAX_QUEUED_FRAGMENTS pixel-samples; the image is bit for bit
+    the one of a draw-by-draw render (the viewer's: sync_draws on, a finish
+    after every draw)."""
+    r = renderer_for("glass-sphere")
+    w, h = 48, 27
+    finishes = []
+    real_finish = type(r.ctx).finish
+
+    def counting_finish(ctx):
+        finishes.append(1)
+        return real_finish(ctx)
+
+    monkeypatch.setattr(type(r.ctx), "finish", counting_finish)
+    job = AdaptiveRender(r, w, h, samples=8, seed=3)
+    assert job.sampler.sync_draws                       # the viewer's default
+    try:
+        synced = job.run().image
+    finally:
+        job.release()
+    synced_finishes = len(finishes)
+    assert synced_finishes >= 3                         # first pass, corner pass, rounds
+    finishes.clear()
+    made = []
+    real_init = AdaptiveRender.__init__
+
+    def recording_init(self, *a, **k):
+        real_init(self, *a, **k)
+        made.append(self)
+
+    monkeypatch.setattr(AdaptiveRender, "__init__", recording_init)
+    queued = render_adaptive(r, w, h, samples=8, seed=3).image
+    assert made and made[0].sampler.sync_draws is False
+    assert np.array_equal(queued, synced)
+    assert finishes == []                       # 48x27 never queues MAX_QUEUED_FRAGMENTS
+
+
+def test_queued_draws_are_finished_at_the_bound(renderer_for):
+    sampler = AdaptiveSampler(renderer_for("glass-sphere"), 16, 9)
+    real_ctx = sampler.ctx
+    finished = []
+    sampler.ctx = type("Ctx", (), {"finish": lambda self: finished.append(1)})()
+    try:
+        sampler.sync_draws = False
+        quarter = A.MAX_QUEUED_FRAGMENTS // 4
+        counts = []
+        for _ in range(6):
+            sampler._drawn(quarter)
+            counts.append(len(finished))
+        assert counts == [0, 0, 0, 1, 1, 1]      # the fourth quarter reaches the bound
+        sampler.sync_draws = True
+        sampler._drawn(1)
+        assert len(finished) == 2                # synced: every draw
+    finally:
+        sampler.ctx = real_ctx
+        sampler.release()
