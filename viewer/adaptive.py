@@ -913,9 +913,9 @@ class AdaptiveSampler:
         #: fit its frame.  An offscreen render (render_adaptive) turns it
         #: off: the driver then draws while Python prepares the next draw,
         #: and finishes at the read-back or after MAX_QUEUED_FRAGMENTS
-        #: (measured, whole renders at 320x180: whitted-exact <=32 7-14%
-        #: and glass-sphere <=16 8% less wall time, the same CPU time; the
-        #: images identical)
+        #: (measured, whole renders at 320x180, interleaved: 7-19% less
+        #: wall time and 3-7% less CPU time, most at larger budgets; the
+        #: images bit for bit the same)
         self.sync_draws = True
         self._queued = 0                 # pixel-samples drawn since the last finish
         #: deal the samples of short runs to several entries (add_samples);

@@ -51,8 +51,8 @@ from .sampling import sample_offsets
 from .scene import Scene, SceneObject
 
 __all__ = [
-    "render_reference", "render_reference_refined", "camera_rays", "pixel_rays", "trace", "first_hit", "fresnel_dielectric", "refract",
-    "medium_at", "contains", "rotation_matrix", "sky_radiance", "EPS_REL",
+    "render_reference", "render_reference_refined", "camera_rays", "pixel_rays", "trace", "first_hit",
+    "fresnel_dielectric", "refract", "medium_at", "contains", "rotation_matrix", "sky_radiance", "EPS_REL",
 ]
 
 EPS_REL = 1e-7          # secondary-ray offset / coincidence tolerance, relative to the scene size
