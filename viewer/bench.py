@@ -315,6 +315,20 @@ def usable_cpus() -> int:
         return os.cpu_count() or 1
 
 
+def effective_refine(samples: int, refine: int | None) -> int:
+    """The refined count a reference of `samples` samples really takes: 0
+    (none) unless `refine` is above `samples` and the float64 tracer is
+    there (the GPU fallback is never refined)."""
+    refine = int(refine or 0)
+    return refine if reference_kind() == "float64" and refine > samples else 0
+
+
+def reference_text(samples: int, refine: int) -> str:
+    """How a reference is sampled, for logs and reports."""
+    return f"{samples} samples" + (f", {refine} where they disagree by more than {REFINE_TOLERANCE:g}"
+                                   if refine else "")
+
+
 def reference_kind() -> str:
     """"float64" when viewer.reference is importable, else "gpu" (fallback)."""
     try:
@@ -333,7 +347,7 @@ def reference_image(scene, stem: str, width: int, height: int, samples: int, cac
     float64 only)."""
     kind = reference_kind()
     ref_scene = _reference_scene(scene)
-    refine = int(refine) if kind == "float64" and int(refine) > samples else 0
+    refine = effective_refine(samples, refine)
     spp = f"s{samples}" + (f"r{refine}t{REFINE_TOLERANCE:g}" if refine else "")
     name = (f"ref-{stem}-{_scene_digest(ref_scene)}-{width}x{height}-{spp}-seed{REFERENCE_SEED}"
             f"-d{REFERENCE_MAX_DEPTH}-w{REFERENCE_MIN_WEIGHT:g}-{kind}-{_reference_source_digest()}.npy")
@@ -991,10 +1005,8 @@ def _stem(name: str, scene) -> str:
 def _run(args, ctx, backend, scenes, width, height, ref_samples, out: Path) -> int:
     info = machine_info(ctx, backend)
     kind = reference_kind()
-    refine = int(getattr(args, "reference_refine", None) or 0)
-    refine = refine if kind == "float64" and refine > ref_samples else 0
-    ref_text = f"{ref_samples} samples" + (f", {refine} where they disagree by more than {REFINE_TOLERANCE:g}"
-                                           if refine else "")
+    refine = effective_refine(ref_samples, getattr(args, "reference_refine", None))
+    ref_text = reference_text(ref_samples, refine)
     info.update({"size": f"{width}x{height}", "repeat": args.repeat, "quick": bool(args.quick),
                  "reference": {"kind": kind, "samples": ref_samples, "refined_samples": refine, "seed": REFERENCE_SEED,
                                "max_depth": REFERENCE_MAX_DEPTH, "min_weight": REFERENCE_MIN_WEIGHT},

@@ -757,8 +757,8 @@ def run_bench(args, ctx, backend: str, name: str, scene, width: int, height: int
     log(f"peer: Mitsuba {info['peer']['mitsuba']} ({peer.variant_note}), {peer.threads} threads, "
         f"sampler {peer.sampler}, path tracer max depth {peer.max_depth}")
 
-    refined = refine if bench.reference_kind() == "float64" and refine > ref_samples else 0
-    ref_text = f"{ref_samples} samples" + (f", {refined} where they disagree" if refined else "")
+    refined = bench.effective_refine(ref_samples, refine)
+    ref_text = bench.reference_text(ref_samples, refined)
     log(f"reference {width}x{height}, {ref_text} ...")
     t0 = time.perf_counter()
     ref, kind, cached = bench.reference_image(scene, stem, width, height, ref_samples, out, ctx=ctx, log=log,
@@ -851,8 +851,7 @@ def run_bench(args, ctx, backend: str, name: str, scene, width: int, height: int
         f"min weight {scene.render.min_weight:g}, stratified samples",
         f"peer: Mitsuba {info['peer']['mitsuba']} (Dr.Jit {info['peer']['drjit']}), variant {peer.variant_note}, "
         f"{peer.threads} threads, path tracer max depth {peer.max_depth}, {peer.sampler} sampler, box filter",
-        f"error: RMSE (linear) against the float64 reference, {ref_text}"
-        f"{f' by more than {bench.REFINE_TOLERANCE:g}' if refined else ''} (seed {bench.REFERENCE_SEED}), "
+        f"error: RMSE (linear) against the float64 reference, {ref_text} (seed {bench.REFERENCE_SEED}), "
         f"max depth {bench.REFERENCE_MAX_DEPTH}, min weight {bench.REFERENCE_MIN_WEIGHT:g}",
         f"time: median of {repeat} interleaved timed renders after untimed warm-up renders; each render finished "
         "(read back) before the clock stops; time to reach an error: log-log interpolation between measured "
