@@ -20,6 +20,13 @@ uniform vec3 camUp;            // up * tan(fov/2)
 
 out vec4 fragColor;
 
+#ifdef FOOTPRINT_AA
+// Footprint samples: in adaptive renders, and in uniform renders of more
+// than one sample (viewer/renderer.py).  FOOTPRINT_SHARE_PASS: no tracing,
+// each pixel's closed-form share only (AdaptiveSampler.share_pass).
+#include "lib/footprint.glsl"
+#endif
+
 #ifdef ADAPTIVE
 // Adaptive sampling (viewer/adaptive.py).  Every sample adds (L, 1) to
 // attachment 0 and (L.L, 0, 0, 0) to attachment 1, so that the sums give
@@ -38,9 +45,6 @@ uniform isampler2D pixelList;
 uniform sampler2D sampleOffsets;
 uniform int chunkStart;
 uniform int chunkSize;
-#endif
-#ifdef FOOTPRINT_AA
-#include "lib/footprint.glsl"
 #endif
 #ifdef ADAPTIVE_FIRST
 layout(location = 2) out vec4 fragFirstHit;     // (t, object index, rays, pixelShare); (INF, -1) for the sky
@@ -542,6 +546,12 @@ vec3 cameraRay(vec2 ij, vec2 offset) {
 }
 
 void main() {
+#ifdef FOOTPRINT_SHARE_PASS
+    // the footprint mask's texel with the pixel's share in g (-1: none)
+    setFootprintPixel(vec2(floor(gl_FragCoord.x), imageSize.y - 1.0 - floor(gl_FragCoord.y)));
+    fragColor = vec4(texelFetch(footprintMask, ivec2(gl_FragCoord.xy), 0).r, pixelShare, 0.0, 1.0);
+    return;
+#endif
 #ifdef ADAPTIVE_LIST
     ivec4 listed = texelFetch(pixelList, ivec2(gl_FragCoord.xy), 0);
     fragColor = vec4(0.0);

@@ -141,7 +141,7 @@ def test_the_mosaic_holds_the_pixels_of_the_real_image(gl):
     assert len(lay.tiles) == 16
     r = Renderer(gl, scene)
     try:
-        full = r.render(W, H, 2, 0)
+        full = r.render(W, H, 2, 0, footprint=False)     # the mosaic's samples are point samples
     finally:
         r.release()
     meas = q.Measurement(gl, scene, lay, [], reference=np.zeros((lay.size[1], lay.size[0], 3)))

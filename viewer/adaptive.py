@@ -884,6 +884,10 @@ class AdaptiveSampler:
     FOOTPRINT = {"FOOTPRINT_AA": 1, "MAX_PIXEL_CORNERS": MAX_PIXEL_CORNERS, "MAX_PIXEL_LINES": MAX_PIXEL_LINES}
     FOOTPRINT_FIRST = {**FIRST, **FOOTPRINT}
     FOOTPRINT_LIST = {**LIST, **FOOTPRINT, "FOOTPRINT_SHARES": 1}
+    #: a uniform render's samples with footprint samples (Renderer.render),
+    #: and the pass that computes the shares they read (share_pass)
+    FOOTPRINT_SAMPLES = {**FOOTPRINT, "FOOTPRINT_SHARES": 1}
+    FOOTPRINT_SHARE_PASS = {**FOOTPRINT, "FOOTPRINT_SHARE_PASS": 1}
     #: the texture units of the footprint mask and of the chain footprints
     FOOTPRINT_UNIT = 3
     FOOTPRINT_CHAIN_UNIT = 4
@@ -994,7 +998,9 @@ class AdaptiveSampler:
         self._chain_tex = self.ctx.texture((3 * c, rows), 4, texels.tobytes(), dtype="f4")
         self._chain_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
 
-    def _bind_footprint(self, prog) -> None:
+    def bind_footprint(self, prog) -> None:
+        """Bind the footprint mask and chain footprints set_footprint gave to
+        `prog` (a FOOTPRINT_AA variant), if it reads them."""
         if self._footprint_tex is not None and "footprintMask" in prog:
             self._footprint_tex.use(location=self.FOOTPRINT_UNIT)
             prog["footprintMask"].value = self.FOOTPRINT_UNIT
@@ -1061,7 +1067,7 @@ class AdaptiveSampler:
                 ctx.disable(moderngl.BLEND)
                 for prog, rects in band_programs():
                     self.renderer.bind(prog, self.width, self.height, offset)
-                    self._bind_footprint(prog)
+                    self.bind_footprint(prog)
                     vao = self.renderer.vao_of(prog)
                     for rect in rects:
                         clipped = intersect_rect(rect, band)
@@ -1123,6 +1129,42 @@ class AdaptiveSampler:
         self.corner_chain = np.ascontiguousarray(out[4], np.float64)
         t, obj = self._first_hits(out[2])
         return np.ascontiguousarray(out[0][..., :3], np.float64), t, obj
+
+    def corner_objects(self):
+        """The object the camera ray through every pixel corner meets first,
+        (H + 1, W + 1) int, -1 for none, top-left corner first: the corner
+        grid of corner_pass, but first geometric hits only (the VIEW_MODE 1
+        variant: no shading, no further rays), which is all footprint_planes
+        needs.  (Where a plane is the first surface it is also the first
+        interaction.)  A generator, a yield per draw."""
+        full = [(self.renderer.variant(VIEW_MODE=1), ((0, 0, self.width + 1, self.height + 1),))]
+        out = yield from self._mrt_pass((self.width + 1, self.height + 1), lambda: full, (0.0, 1.0), 1)
+        return self._first_hits(out[0])[1]
+
+    def share_pass(self):
+        """Each footprint pixel's closed-form share into the mask, as the
+        first pass computes it, but with no tracing: for renders whose
+        samples all read it (FOOTPRINT_SAMPLES).  A generator, a yield per
+        draw."""
+        if self._footprint_tex is None:
+            return
+        full = [(self.renderer.variant(**self.FOOTPRINT_SHARE_PASS), ((0, 0, self.width, self.height),))]
+        out = yield from self._mrt_pass((self.width, self.height), lambda: full, (0.5, 0.5), 1)
+        self._footprint_texels[..., 1] = out[0][::-1, :, 1]
+        self._footprint_tex.write(self._footprint_texels.tobytes())
+
+    def direct_footprints(self):
+        """Footprint samples for a uniform render (Renderer.render, the
+        viewer's accumulation): the mask holds every pixel whose four corner
+        rays meet one checkered plane first, with its closed-form share,
+        for the current camera.  Direct footprints only: their shares are
+        exact, so the render still converges to the box-filtered pixel
+        (chain footprints allow a small bias, CHAIN_TOLERANCE, which an
+        adaptive render's own samples bound).  A generator, a yield per
+        draw."""
+        obj = yield from self.corner_objects()
+        self.set_footprint(footprint_planes(self.renderer.scene, obj))
+        yield from self.share_pass()
 
     def set_offsets(self, offsets: np.ndarray) -> None:
         """The sample offsets (n, 2) the list passes read (texel k: sample k)."""
@@ -1293,7 +1335,7 @@ class AdaptiveSampler:
                     prog["sampleOffsets"].value = 2
                     prog["chunkStart"].value = k0
                     prog["chunkSize"].value = batch
-                    self._bind_footprint(prog)
+                    self.bind_footprint(prog)
                     fbo.use()
                     tex.use(location=1)
                     self._offsets_tex.use(location=2)

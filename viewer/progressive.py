@@ -77,6 +77,13 @@ class Progressive:
         self._slot_tex = None       # (W, H) R32I: each pixel's texel in that texture, -1 if not in the round
         self._step_s = 0.0  # duration of the latest adaptive step (predicts the next one)
         self.uploads = 0  # times accum_tex got new adaptive sums (the viewer shows them at once)
+        # uniform mode's footprint samples (Renderer.render's, so that a
+        # finished accumulation equals the offscreen image): an
+        # AdaptiveSampler of the accumulation's size whose mask is made for
+        # each still view by its direct_footprints steps, before the first band
+        self._fp: AdaptiveSampler | None = None
+        self._fp_steps = None     # those steps while they run
+        self._fp_ready = False    # the mask is the current view's
 
     # ------------------------------------------------------------ state
 
@@ -178,8 +185,16 @@ class Progressive:
         self.passes_done = 0
         self.next_row = 0
         self._release_job()
+        self._stop_footprints()
         if self.accum_fbo is not None:
             self.accum_fbo.clear(0.0, 0.0, 0.0, 0.0)
+
+    def _stop_footprints(self) -> None:
+        """The footprint mask is no longer the view's (a new one is made
+        before the next first band)."""
+        if self._fp_steps is not None:
+            self._fp_steps.close()        # (its pass's finally: no scissor left behind)
+        self._fp_steps, self._fp_ready = None, False
 
     def _release_job(self) -> None:
         if self.job is not None:
@@ -240,12 +255,41 @@ class Progressive:
         self.last_trace_ms = dt * 1000.0
         return self.last_trace_ms
 
+    def _footprints_pending(self, budget_s: float) -> bool:
+        """Advance the making of this view's footprint mask (when the
+        uniform accumulation takes footprint samples: Renderer.takes_footprint)
+        by steps within `budget_s` (at least one); True while it is not done."""
+        if self._fp_ready or self.passes_done or self.next_row or not self.renderer.takes_footprint(self.samples):
+            return False
+        w, h = self.size
+        if self._fp_steps is None:
+            fp = self._fp
+            if fp is None or fp.renderer is not self.renderer or (fp.width, fp.height) != (w, h):
+                if fp is not None:
+                    fp.release()
+                self._fp = AdaptiveSampler(self.renderer, w, h, footprint=True)
+            self._fp_steps = self._fp.direct_footprints()
+        t0 = time.perf_counter()
+        while True:
+            try:
+                next(self._fp_steps)
+            except StopIteration:
+                self._fp_steps, self._fp_ready = None, True
+                return False
+            if time.perf_counter() - t0 >= budget_s:
+                return True
+
     def _band(self, rows: int) -> None:
         """Trace `rows` rows of the current pass from next_row down."""
         w, h = self.size
         off = self.offsets()[self.passes_done]
         y0 = h - self.next_row - rows  # GL rows count from the bottom
-        self.renderer.draw_sample(w, h, (float(off[0]), float(off[1])), (0, y0, w, rows))
+        offset, viewport = (float(off[0]), float(off[1])), (0, y0, w, rows)
+        if self._fp_ready:
+            groups = self.renderer.programs_for(w, h, **AdaptiveSampler.FOOTPRINT_SAMPLES)
+            self.renderer.draw_groups(groups, w, h, offset, viewport, self._fp.bind_footprint)
+        else:
+            self.renderer.draw_sample(w, h, offset, viewport)
         self.next_row += rows
         if self.next_row >= h:
             self.passes_done += 1
@@ -261,12 +305,15 @@ class Progressive:
         if self._adaptive:
             return self._accumulate_adaptive(budget_ms, stop_at_pass_end)
         budget = (self.target_ms if budget_ms is None else budget_ms) / 1000.0
+        t_start = time.perf_counter()
+        if self._footprints_pending(budget):
+            self.last_trace_ms = (time.perf_counter() - t_start) * 1000.0
+            return self.last_trace_ms
         ctx = self.ctx
         self.accum_fbo.use()
         ctx.enable(moderngl.BLEND)
         ctx.blend_func = moderngl.ONE, moderngl.ONE
         ctx.blend_equation = moderngl.FUNC_ADD
-        t_start = time.perf_counter()
         try:
             first = True
             while not self.done:
@@ -504,6 +551,10 @@ class Progressive:
 
     def release(self) -> None:
         self._release_job()
+        self._stop_footprints()
+        if self._fp is not None:
+            self._fp.release()
+            self._fp = None
         self._release_targets()
         self._release_display()
         self.size = (0, 0)

@@ -14,7 +14,14 @@ pixels:
   each cell of a grid over it (the shader is given camera vectors that make
   a small framebuffer show exactly those pixels of the W x H image), so the
   error is the error at the real size: a scaled-down picture would count
-  edges, where the sampling error lives, many times over.
+  edges, where the sampling error lives, many times over.  The candidates
+  take point samples: a mosaic's pixel corners are not the image's, so the
+  footprint samples ``glassray render`` takes from two samples on
+  (Renderer.render) are not applied.  On a scene with a checkered plane the
+  error measured for more than one sample therefore includes the checker's
+  aliasing that render's footprint samples remove: it overstates render's
+  error, and the choice errs on the safe side (it may pick a slower
+  candidate than needed).
 * **reference**: the scene's own shader with max depth 16 and min weight
   1e-4 (the bench's reference trace settings; going deeper changes the
   default scene by about 4e-4 RMSE) and :data:`REFERENCE_SAMPLES` samples:

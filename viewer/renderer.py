@@ -71,6 +71,7 @@ class Renderer:
         self._camera_key = None
         self._camera: dict = {}
         self._fbo_tex: moderngl.Texture | None = None
+        self._footprints = None           # footprint_sampler's AdaptiveSampler
         self.scene: Scene | None = None
         self.program: moderngl.Program | None = None
         self.set_scene(scene)
@@ -142,20 +143,30 @@ class Renderer:
         whose variant is not ready is drawn with a ready variant for more
         objects, or with the full shader."""
         if self.program is self._main and self.culls():
-            for prog, rects in self._culled(width, height, compile=compile):
-                self.bind(prog, width, height, offset)
-                vao = self.vao_of(prog)
-                for rect in rects:
-                    clipped = rect if viewport is None else intersect_rect(rect, viewport)
-                    if clipped is None:
-                        continue
-                    self.ctx.scissor = clipped
-                    vao.render(moderngl.TRIANGLES, vertices=3)
-            self.ctx.scissor = None
+            self.draw_groups(self._culled(width, height, compile=compile), width, height, offset, viewport)
             return
         self.bind(self.program, width, height, offset)
         self.ctx.scissor = viewport
         self._vao().render(moderngl.TRIANGLES, vertices=3)
+        self.ctx.scissor = None
+
+    def draw_groups(self, groups, width: int, height: int, offset: tuple[float, float],
+                    viewport: tuple[int, int, int, int] | None = None,
+                    bind: Callable[[moderngl.Program], None] | None = None) -> None:
+        """Draw one sample with `groups`, (program, rectangles) pairs that
+        cover the image once (programs_for), within `viewport`; `bind` binds
+        what a variant reads beyond bind()'s (footprint samples' mask)."""
+        for prog, rects in groups:
+            self.bind(prog, width, height, offset)
+            if bind is not None:
+                bind(prog)
+            vao = self.vao_of(prog)
+            for rect in rects:
+                clipped = rect if viewport is None else intersect_rect(rect, viewport)
+                if clipped is None:
+                    continue
+                self.ctx.scissor = clipped
+                vao.render(moderngl.TRIANGLES, vertices=3)
         self.ctx.scissor = None
 
     def culls(self) -> bool:
@@ -318,11 +329,50 @@ class Renderer:
             return np.ascontiguousarray(raw[::-1])
         return np.divide(raw[::-1], np.float32(samples))
 
+    def takes_footprint(self, samples: int) -> bool:
+        """Whether render() of `samples` samples takes footprint samples
+        unless told otherwise: with more than one sample (one is the spec's
+        centred point sample) where the scene has a checkered plane."""
+        from .adaptive import footprint_default
+        return samples > 1 and footprint_default(self.scene)
+
+    def footprint_sampler(self, width: int, height: int):
+        """An AdaptiveSampler of this size whose footprint mask holds, for the
+        current camera, every pixel whose four corner rays meet one
+        checkered plane first, with its closed-form share: what the
+        FOOTPRINT_SAMPLES variants read.  Kept for the next render of this
+        size (its targets cost as much to make as a sample of the sky)."""
+        from .adaptive import AdaptiveSampler, drain
+        s = self._footprints
+        if s is None or (s.width, s.height) != (width, height):
+            if s is not None:
+                s.release()
+            s = self._footprints = AdaptiveSampler(self, width, height, footprint=True)
+            s.sync_draws = False
+        drain(s.direct_footprints())
+        return s
+
     def render(self, width: int, height: int, samples: int | None = None, seed: int = 0,
-               progress: Callable[[int, int], None] | None = None) -> np.ndarray:
-        """(H, W, 3) float32 linear RGB, exposure applied, first row = top."""
+               progress: Callable[[int, int], None] | None = None,
+               footprint: bool | None = None) -> np.ndarray:
+        """(H, W, 3) float32 linear RGB, exposure applied, first row = top.
+
+        footprint: footprint samples (shaders/lib/footprint.glsl): where a
+        pixel's four corner rays all meet one checkered plane first, a
+        camera ray that meets that plane takes the checker's two colours
+        mixed by their exact shares of the pixel's square (the box filter
+        every pixel converges to) instead of the colour at its point; its
+        lighting stays its own.  The same limit, reached sooner: the checker
+        costs no samples.  None: takes_footprint (more than one sample, a
+        checkered plane)."""
         samples = samples or self.scene.render.samples
         offsets = sample_offsets(samples, seed)
+        if footprint is None:
+            footprint = self.takes_footprint(samples)
+        fp = self.footprint_sampler(width, height) if footprint else None
+        if fp is not None:
+            from .adaptive import AdaptiveSampler
+            groups = self.programs_for(width, height, compile_all=True, **AdaptiveSampler.FOOTPRINT_SAMPLES)
         ctx = self.ctx
         fbo = self._target(width, height)
         fbo.use()
@@ -339,7 +389,10 @@ class Renderer:
                 elif i == 1:
                     ctx.enable(moderngl.BLEND)
                 for rect in tiles:
-                    self.draw_sample(width, height, off, rect)
+                    if fp is None:
+                        self.draw_sample(width, height, off, rect)
+                    else:
+                        self.draw_groups(groups, width, height, off, rect, fp.bind_footprint)
                     # Wait for each draw: the queue never holds more than one
                     # tile, so Ctrl-C (checked between draws) stops at once and
                     # the progress bar is truthful.
@@ -383,6 +436,9 @@ class Renderer:
 
     def release(self) -> None:
         self._release_target()
+        if self._footprints is not None:
+            self._footprints.release()
+            self._footprints = None
         for vao in self._vao_for.values():
             vao.release()
         for prog in (*self._programs.values(), *self._subset_programs.values()):

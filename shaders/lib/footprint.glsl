@@ -1,5 +1,11 @@
 // Footprint samples (viewer/adaptive.py): the checker of a plane
 // box-filtered over a pixel's square, exactly, instead of point-sampled.
+// Adaptive renders take them, and so do uniform renders of more than one
+// sample (Renderer.render, the viewer's accumulation), with direct
+// footprints only (exact shares: the same limit as point samples); their
+// mask comes from AdaptiveSampler.direct_footprints, the shares from its
+// share pass (FOOTPRINT_SHARE_PASS in trace.frag), and every sample reads
+// them (FOOTPRINT_SHARES).
 //
 // Texel (i, H - 1 - j) of footprintMask (RG32F) holds in r k + 1 where the
 // four corner rays of pixel (i, j) meet checkered plane k first, -(e + 1)
