@@ -10,6 +10,7 @@ import math
 import re
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -128,12 +129,18 @@ def test_sweep_covers_every_knob():
     full = bench.sweep(scene, reference_samples=64)
     assert full[0].label == "default"
     assert full[0].key() == (scene.render.max_depth, scene.render.samples, scene.render.min_weight, 1.0, True, "exact",
-                             None)
+                             None, True)
     assert full[0].adaptive is None
     assert len({s.key() for s in full}) == len(full)
     assert len({s.label for s in full}) == len(full)
-    for knob in ("max_depth=", "samples=", "min_weight=", "scale=", "generic", "schlick", "adaptive "):
+    for knob in ("max_depth=", "samples=", "min_weight=", "scale=", "generic", "schlick", "adaptive ", "point samples"):
         assert any(s.label.startswith(knob) for s in full), knob
+    # the default settings point-sampled: only footprint samples differ
+    point = next(s for s in full if s.label == "point samples")
+    assert point == replace(full[0], label="point samples", footprint=False)
+    # a scene without a checkered plane has no such setting (nothing would differ)
+    flat = replace(scene, materials={k: replace(m, checker=None) for k, m in scene.materials.items()})
+    assert not any(s.label == "point samples" for s in bench.sweep(flat, reference_samples=64))
     assert all(s.samples < 64 for s in full if s.samples != scene.render.samples)
     quick = bench.sweep(scene, quick=True, reference_samples=4)
     assert 2 <= len(quick) <= 8 and quick[0].label == "default"
@@ -162,7 +169,7 @@ def test_sweep_adaptive_points():
     # a budget at or above the reference's samples is left out, like a uniform sample count
     assert all(s.samples < 32 or s.samples == n for s in bench.sweep(scene, reference_samples=32))
     uniform = [s for s in full if s.adaptive is None]
-    assert len(uniform) == len(full) - len(ad) and all(s.key()[-1] is None for s in uniform)
+    assert len(uniform) == len(full) - len(ad) and all(s.key()[-2] is None for s in uniform)   # (adaptive, footprint)
 
 
 # A plain, unchecked floor seen from above: no silhouette, no normal or depth

@@ -78,7 +78,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .adaptive import DEFAULT_TARGET_ERROR  # (no GL at import: the module creates no context)
+from .adaptive import DEFAULT_TARGET_ERROR, footprint_default  # (no GL at import: the module creates no context)
 
 #: The benchmark's scenes when none is named: the default scene, opaque only,
 #: one glass sphere, many objects.
@@ -105,6 +105,7 @@ CLOCKS = ("wall", "cpu")
 
 CSV_COLUMNS = ("scene", "setting", "is_default", "pareto_wall", "pareto_cpu", "max_depth", "samples",
                "adaptive_target", "mean_spp", "min_weight", "scale", "width", "height", "specialise", "fresnel",
+               "footprint",
                "time_ms", "time_min_ms", "time_max_ms", "cpu_ms", "repeat", "rmse", "frac_off_1_255", "max_abs_err")
 
 
@@ -117,7 +118,9 @@ class Setting:
     own settings ("default" for none).  ``adaptive``: None for uniform
     sampling (``samples`` per pixel everywhere), else the per-pixel target
     error of adaptive sampling (viewer.adaptive), ``samples`` then being the
-    mean budget per pixel."""
+    mean budget per pixel.  ``footprint`` False: point samples only (no
+    footprint samples on a checkered plane: Renderer.render's and
+    render_adaptive's footprint=False)."""
     label: str
     max_depth: int
     samples: int
@@ -126,10 +129,11 @@ class Setting:
     specialise: bool = True
     fresnel: str = "exact"
     adaptive: float | None = None
+    footprint: bool = True
 
     def key(self) -> tuple:
         return (self.max_depth, self.samples, self.min_weight, self.scale, self.specialise, self.fresnel,
-                self.adaptive)
+                self.adaptive, self.footprint)
 
 
 #: Adaptive points of the full sweep: (target error, budget as a multiple of
@@ -195,6 +199,10 @@ def sweep(scene, quick: bool = False, reference_samples: int | None = None) -> l
         add(replace(base, label=f"scale={sc:g}", scale=sc))
     add(replace(base, label="generic", specialise=False))
     add(replace(base, label="schlick", fresnel="schlick"))
+    # What footprint samples bring (render's default from 2 samples on a
+    # checkered plane): the same samples, point-sampled
+    if r.samples > 1 and footprint_default(scene):
+        add(replace(base, label="point samples", footprint=False))
     # Combined presets: where several cheap changes together land.
     add(Setting("preset:preview", 4, 1, 0.01, scale=0.5))
     add(Setting("preset:fast", 4, 4, 0.01))
@@ -480,10 +488,11 @@ def _render_setting(renderer, setting: Setting, w: int, h: int) -> tuple[np.ndar
     """One render of a setting at (w, h): the image (H, W, 3) and, for an
     adaptive setting, the mean samples per pixel it used (None: uniform)."""
     if setting.adaptive is None:
-        return renderer.render(w, h, setting.samples, RENDER_SEED), None
+        return renderer.render(w, h, setting.samples, RENDER_SEED, footprint=None if setting.footprint else False), None
     from .adaptive import render_adaptive
 
-    res = render_adaptive(renderer, w, h, setting.samples, setting.adaptive, seed=RENDER_SEED)
+    res = render_adaptive(renderer, w, h, setting.samples, setting.adaptive, seed=RENDER_SEED,
+                          footprint=None if setting.footprint else False)
     return res.image, res.mean_spp
 
 
@@ -609,6 +618,7 @@ def _row(res: Result) -> dict:
             "mean_spp": f"{res.spp_used:.4f}" if st.adaptive is not None else str(st.samples),
             "min_weight": _fmt_w(st.min_weight), "scale": f"{st.scale:g}", "width": res.width,
             "height": res.height, "specialise": int(st.specialise), "fresnel": st.fresnel,
+            "footprint": int(st.footprint),
             "time_ms": f"{res.time_ms:.4f}", "time_min_ms": f"{min(res.times):.4f}",
             "time_max_ms": f"{max(res.times):.4f}", "cpu_ms": f"{res.cpu_ms:.4f}", "repeat": len(res.times),
             "rmse": f"{res.errors['rmse']:.10g}", "frac_off_1_255": f"{res.errors['frac_off']:.6g}",
