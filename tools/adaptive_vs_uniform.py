@@ -1,8 +1,10 @@
 """Adaptive against uniform sampling at equal error: the numbers of the
 README's "Adaptive anti-aliasing" section (issue 7).
 
-For each scene at 320x180: uniform renders at 16, 32 and 64 samples and
-adaptive renders (``viewer.adaptive.render_adaptive``, default target) at
+For each scene at 320x180: uniform renders at 16, 32 and 64 samples (as
+``uniform-point`` with point samples only, the baseline of the ratios, as
+issue 7 measured them; as ``uniform`` with the footprint samples
+``Renderer.render`` takes from 2 samples on since) and adaptive renders (``viewer.adaptive.render_adaptive``, default target) at
 budgets of 4 to 32 rays per pixel, with footprint samples on the checker
 (the default) and, as ``adaptive-point``, without, each rendered once untimed (the
 image compared) and then timed in 5 interleaved rounds (order reversed
@@ -45,7 +47,8 @@ OUT = Path("bench-results/adaptive")
 # (kind, samples); "adaptive@E": adaptive with target error E instead of
 # the default (a budget that is not a whole number of samples per pixel:
 # the render stops where every pixel's estimate is below E)
-SETTINGS = [("uniform", 16), ("uniform", 32), ("uniform", 64),
+SETTINGS = [("uniform-point", 16), ("uniform-point", 32), ("uniform-point", 64),
+            ("uniform", 16), ("uniform", 32), ("uniform", 64),
             ("adaptive", 4), ("adaptive@0.004", 4), ("adaptive@0.006", 4),
             ("adaptive", 5), ("adaptive", 6), ("adaptive@0.003", 6), ("adaptive", 7), ("adaptive", 8),
             ("adaptive", 12), ("adaptive", 16), ("adaptive", 24), ("adaptive", 32),
@@ -105,8 +108,9 @@ def measure(names: list[str]) -> None:
             AdaptiveSampler(r, W, H, footprint=footprint).compile()
 
         def run(kind, n):
-            if kind == "uniform":
-                return r.render(W, H, n, seed=bench.RENDER_SEED), float(n), float(n)
+            if kind.startswith("uniform"):
+                img = r.render(W, H, n, seed=bench.RENDER_SEED, footprint=False if kind == "uniform-point" else None)
+                return img, float(n), float(n)
             target = float(kind.split("@")[1]) if "@" in kind else DEFAULT_TARGET_ERROR
             res = render_adaptive(r, W, H, n, target_error=target, seed=bench.RENDER_SEED,
                                   footprint=False if kind == "adaptive-point" else None)
@@ -123,14 +127,15 @@ def measure(names: list[str]) -> None:
                 run(kind, n)
                 info[(kind, n)]["wall"].append(time.perf_counter() - t0)
                 info[(kind, n)]["cpu"].append(time.process_time() - c0)
-        u64 = info[("uniform", 64)]
+        base = ("uniform-point", 64)         # the ratios' baseline ("u64")
+        u64 = info[base]
         med = {k: {c: statistics.median(v[c]) * 1e3 for c in ("wall", "cpu")} for k, v in info.items()}
         for (kind, n), d in info.items():
             row = dict(scene=name, setting=f"{kind} {n}", mean_spp=d["spp"], rays_per_px=d["rays"],
                        wall_ms=med[(kind, n)]["wall"], cpu_ms=med[(kind, n)]["cpu"],
                        rmse_bench=d["rmse"]["bench"], rmse_own=d["rmse"]["own"],
-                       rays_vs_u64=d["rays"] / 64, wall_vs_u64=med[(kind, n)]["wall"] / med[("uniform", 64)]["wall"],
-                       cpu_vs_u64=med[(kind, n)]["cpu"] / med[("uniform", 64)]["cpu"],
+                       rays_vs_u64=d["rays"] / 64, wall_vs_u64=med[(kind, n)]["wall"] / med[base]["wall"],
+                       cpu_vs_u64=med[(kind, n)]["cpu"] / med[base]["cpu"],
                        rmse_bench_vs_u64=d["rmse"]["bench"] / u64["rmse"]["bench"],
                        rmse_own_vs_u64=d["rmse"]["own"] / u64["rmse"]["own"])
             rows.append(row)

@@ -886,8 +886,8 @@ class AdaptiveSampler:
     FOOTPRINT_LIST = {**LIST, **FOOTPRINT, "FOOTPRINT_SHARES": 1}
     #: a uniform render's samples with footprint samples (Renderer.render),
     #: and the pass that computes the shares they read (share_pass)
-    FOOTPRINT_SAMPLES = {**FOOTPRINT, "FOOTPRINT_SHARES": 1}
-    FOOTPRINT_SHARE_PASS = {**FOOTPRINT, "FOOTPRINT_SHARE_PASS": 1}
+    FOOTPRINT_SAMPLES = {**FOOTPRINT, "FOOTPRINT_SHARES": 1, "FOOTPRINT_DIRECT_ONLY": 1}
+    FOOTPRINT_SHARE_PASS = {**FOOTPRINT, "FOOTPRINT_SHARE_PASS": 1, "FOOTPRINT_DIRECT_ONLY": 1}
     #: the texture units of the footprint mask and of the chain footprints
     FOOTPRINT_UNIT = 3
     FOOTPRINT_CHAIN_UNIT = 4

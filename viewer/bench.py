@@ -455,7 +455,16 @@ class Result(Timings):
 class _Renderers:
     """One Renderer per shader variant (specialised / generic, exact /
     Schlick) of a scene; a setting switches scene values with set_scene
-    (programs are cached by their defines, so switching is cheap)."""
+    (programs are cached by their defines, so switching is cheap).
+
+    Each keeps every culling variant it compiles (SUBSET_PROGRAMS): the
+    sweep's settings need more than the viewer's cache of 16 holds (max
+    depth is a compile-time constant, and uniform, footprint and adaptive
+    passes are variants of their own), and with 16 the timed renders of
+    the default scene recompiled 24 variants a round, whose time they
+    counted (Mesa's shader cache made each a few ms to tens of ms)."""
+
+    SUBSET_PROGRAMS = 1024
 
     def __init__(self, ctx):
         self.ctx = ctx
@@ -472,6 +481,7 @@ class _Renderers:
         r = self._by_variant.get(variant)
         if r is None:
             r = Renderer(self.ctx, s, specialise=setting.specialise, fresnel=setting.fresnel)
+            r.SUBSET_PROGRAMS = self.SUBSET_PROGRAMS
             self._by_variant[variant] = r
         elif self._current.get(variant) != setting.key():
             r.set_scene(s)

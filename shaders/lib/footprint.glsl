@@ -38,6 +38,9 @@
 // own principal chain matches and lands within that tolerance of where the
 // homography puts it takes the shares; any other takes a point sample.
 //
+// FOOTPRINT_DIRECT_ONLY (uniform renders): no chain footprints, compiled
+// out, so that the rows are dead once a sample's share is set.
+//
 // Both kinds reach the closed form as three rows: plane coordinate x (z) =
 // (fpX . w) / (fpW . w) ((fpZ . w) / (fpW . w)), w = (u, v, 1), camera-relative,
 // with fpW . w > 0 over the square.
@@ -263,6 +266,7 @@ void setFootprintPixel(vec2 ij) {
     fpX = vec3(pixEu.x, pixEv.x, pixD00.x);
     fpZ = vec3(pixEu.z, pixEv.z, pixD00.z);
     fpW = vec3(pixEu.y, pixEv.y, pixD00.y) / (h != 0.0 ? h : 1.0);
+#ifndef FOOTPRINT_DIRECT_ONLY
     if (code < -0.5) {
         int e = int(-code + 0.5) - 1;
         ivec2 at = ivec2(3 * (e % chainEntriesPerRow), e / chainEntriesPerRow);
@@ -274,6 +278,7 @@ void setFootprintPixel(vec2 ij) {
         fpX = t0.xyz; fpZ = t1.xyz; fpW = t2.xyz;
         fpTol2 = t2.w;
     }
+#endif
 #ifdef FOOTPRINT_SHARES
     // the share the first pass computed for this pixel (-1: none; read,
     // not recomputed: the closed form's loops run up to MAX_PIXEL_CORNERS
@@ -287,8 +292,10 @@ void setFootprintPixel(vec2 ij) {
 // Once per sample at `offset`: the share its camera ray takes on the plane.
 void setFootprintSample(vec2 offset) {
     fpOffset = offset;
-    float row = rowCoverage(footprintObject, offset.y, footprintObject >= 0 && pixelShare < 0.0);
-    footprintShare = pixelShare >= 0.0 ? pixelShare : row;
+    footprintShare = pixelShare;
+    // (a branch: a SIMD group none of whose pixels needs its row skips it)
+    if (footprintObject >= 0 && pixelShare < 0.0)
+        footprintShare = rowCoverage(footprintObject, offset.y, true);
 }
 
 // Whether a ray of this sample that met plane k at p (camera-relative)
@@ -296,6 +303,11 @@ void setFootprintSample(vec2 offset) {
 // plane and chain, and (a chain footprint) within the tolerance of where
 // the homography puts the sample.
 bool takesFootprint(int k, float chain, vec3 p) {
+#ifdef FOOTPRINT_DIRECT_ONLY
+    // only the camera ray itself (chain 0): nothing of the homography stays
+    // live through the ray tree
+    return k == footprintObject && chain == 0.0 && footprintShare >= 0.0;
+#endif
     if (k != footprintObject || chain != footprintChainId || footprintShare < 0.0) return false;
     vec2 e = p.xz - planePoint(fpOffset);
     return chain == 0.0 || dot(e, e) <= fpTol2;
