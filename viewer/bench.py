@@ -787,6 +787,7 @@ def plot(path: Path, by_scene: dict[str, list[Result]], titles: dict[str, str], 
               ("samples", "samples", "#2ca02c", "s", 36), ("min_weight", "min weight", "#9467bd", "^", 40),
               ("scale", "resolution scale", "#8c564b", "D", 32), ("generic", "generic shader", "#ff7f0e", "X", 60),
               ("schlick", "Schlick Fresnel", "#e377c2", "P", 60), ("preset", "combined preset", "#7f7f7f", "v", 40),
+              ("point samples", "point samples (no footprint samples)", "#bcbd22", "d", 50),
               ("adaptive", "adaptive (e target \u2264 mean budget)", "#17becf", "h", 70))
     for ax, (stem, results) in zip(axes.flat, by_scene.items()):
         floor = min((r.errors["rmse"] for r in results if r.errors["rmse"] > 0), default=1e-6) / 2
