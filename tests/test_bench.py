@@ -496,3 +496,33 @@ def test_bench_with_a_refined_reference(tmp_path):
     assert "16 where they disagree by more than" in (out / "results.md").read_text()
     machine = json.loads((out / "machine.json").read_text())
     assert machine["reference"]["refined_samples"] == 16
+
+
+def test_timed_renders_compile_nothing(gl, monkeypatch):
+    """After one pass over the default scene's whole sweep (the warm-up),
+    a second pass (a timed round) builds no shader program: every culling
+    variant of every setting stays compiled (bench._Renderers keeps them
+    all).  With the viewer's cache of 16 the second pass rebuilt 24."""
+    import viewer.renderer as renderer_module
+    from viewer.scene import load_scene
+
+    built = []
+    real = renderer_module.build_program
+    monkeypatch.setattr(renderer_module, "build_program", lambda *a, **k: built.append(1) or real(*a, **k))
+    scene = load_scene("default")
+    # at most 4 samples (the variants do not depend on the count, from 2 on:
+    # footprint samples; adaptive budgets of 4 trace the corner rays too),
+    # at a size where the culling plan has several groups
+    settings = [replace(s, samples=min(s.samples, 4)) for s in bench.sweep(scene, reference_samples=64)
+                if s.specialise and s.fresnel == "exact" and s.scale == 1.0]
+    pool = bench._Renderers(gl)
+    try:
+        for s in settings:
+            bench._render_setting(pool.get(scene, s), s, 160, 90)
+        assert len(built) > 16                       # more variants than the viewer's cache holds
+        built.clear()
+        for s in settings:
+            bench._render_setting(pool.get(scene, s), s, 160, 90)
+        assert built == []
+    finally:
+        pool.release()
