@@ -247,13 +247,9 @@ float rowCoverage(int k, float v, bool need) {
 }
 
 // Once per pixel (i, j): its plane, its square's rows and the closed form.
-void setFootprintPixel(vec2 ij) {
-    int row = int(imageSize.y - 1.0 - ij.y);
-    vec4 texel = texelFetch(footprintMask, ivec2(ij.x, row), 0);
-    float code = texel.r;
-    footprintObject = code > 0.5 ? int(code + 0.5) - 1 : -1;
-    footprintChainId = 0.0;
-    fpTol2 = INF;
+// The rows of a directly seen plane's pixel (i, j): the camera ray
+// through (i + u, j + v) meets footprintObject's plane.
+void setDirectRows(vec2 ij) {
     vec2 uv0 = ij / imageSize;
     pixD00 = camForward + (2.0 * uv0.x - 1.0) * camRight + (1.0 - 2.0 * uv0.y) * camUp;
     pixEu = (2.0 / imageSize.x) * camRight;
@@ -266,6 +262,27 @@ void setFootprintPixel(vec2 ij) {
     fpX = vec3(pixEu.x, pixEv.x, pixD00.x);
     fpZ = vec3(pixEu.z, pixEv.z, pixD00.z);
     fpW = vec3(pixEu.y, pixEv.y, pixD00.y) / (h != 0.0 ? h : 1.0);
+}
+
+#if defined(FOOTPRINT_DIRECT_ONLY) && defined(FOOTPRINT_SHARES)
+// Uniform renders read every share and need the rows only for a sample's
+// row fallback: they are set there (setFootprintSample), not per pixel.
+#define FOOTPRINT_LAZY_ROWS
+vec2 fpPixel;
+#endif
+
+void setFootprintPixel(vec2 ij) {
+    int row = int(imageSize.y - 1.0 - ij.y);
+    vec4 texel = texelFetch(footprintMask, ivec2(ij.x, row), 0);
+    float code = texel.r;
+    footprintObject = code > 0.5 ? int(code + 0.5) - 1 : -1;
+    footprintChainId = 0.0;
+    fpTol2 = INF;
+#ifdef FOOTPRINT_LAZY_ROWS
+    fpPixel = ij;
+#else
+    setDirectRows(ij);
+#endif
 #ifndef FOOTPRINT_DIRECT_ONLY
     if (code < -0.5) {
         int e = int(-code + 0.5) - 1;
@@ -294,8 +311,12 @@ void setFootprintSample(vec2 offset) {
     fpOffset = offset;
     footprintShare = pixelShare;
     // (a branch: a SIMD group none of whose pixels needs its row skips it)
-    if (footprintObject >= 0 && pixelShare < 0.0)
+    if (footprintObject >= 0 && pixelShare < 0.0) {
+#ifdef FOOTPRINT_LAZY_ROWS
+        setDirectRows(fpPixel);
+#endif
         footprintShare = rowCoverage(footprintObject, offset.y, true);
+    }
 }
 
 // Whether a ray of this sample that met plane k at p (camera-relative)
