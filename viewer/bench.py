@@ -461,8 +461,9 @@ class _Renderers:
     sweep's settings need more than the viewer's cache of 16 holds (max
     depth is a compile-time constant, and uniform, footprint and adaptive
     passes are variants of their own), and with 16 the timed renders of
-    the default scene recompiled 24 variants a round, whose time they
-    counted (Mesa's shader cache made each a few ms to tens of ms)."""
+    the default scene recompiled 24 variants a round.  (Measured, it cost
+    little: with Mesa's shader cache a round of all settings took the same
+    17-20 s either way; but a timed render must not compile.)"""
 
     SUBSET_PROGRAMS = 1024
 
@@ -497,12 +498,12 @@ class _Renderers:
 def _render_setting(renderer, setting: Setting, w: int, h: int) -> tuple[np.ndarray, float | None]:
     """One render of a setting at (w, h): the image (H, W, 3) and, for an
     adaptive setting, the mean samples per pixel it used (None: uniform)."""
+    footprint = None if setting.footprint else False     # None: the renderers' own default
     if setting.adaptive is None:
-        return renderer.render(w, h, setting.samples, RENDER_SEED, footprint=None if setting.footprint else False), None
+        return renderer.render(w, h, setting.samples, RENDER_SEED, footprint=footprint), None
     from .adaptive import render_adaptive
 
-    res = render_adaptive(renderer, w, h, setting.samples, setting.adaptive, seed=RENDER_SEED,
-                          footprint=None if setting.footprint else False)
+    res = render_adaptive(renderer, w, h, setting.samples, setting.adaptive, seed=RENDER_SEED, footprint=footprint)
     return res.image, res.mean_spp
 
 

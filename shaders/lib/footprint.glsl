@@ -216,19 +216,20 @@ float rowCrossing(float v, int axis, float b) {
 }
 
 // The share of the pixel's row at v, u in [0, 1), on the checker's second
-// colour, or -1 (not needed: `need` false, or too many lines).  The row's
+// colour, or -1 (too many lines).  Called only where a sample needs it (a
+// branch in setFootprintSample).  The row's
 // two ends meet the plane, so along it x and z are monotone in u and each
 // checker line is crossed once: the crossings of the two axes, merged in
 // order of u, flip the parity.
-float rowCoverage(int k, float v, bool need) {
+float rowCoverage(int k, float v) {
     Object o = objects[max(k, 0)];
     Material m = materials[o.info.y];
     float size = m.dielectric.w;
     vec2 off = m.checkerOffset.xy;
     vec2 c0 = cellOf(vec2(0.0, v), off, size), c1 = cellOf(vec2(1.0, v), off, size);
     vec2 dir = sign(c1 - c0);
-    bool ok = need && k >= 0 && abs(c1.x - c0.x) + abs(c1.y - c0.y) <= float(MAX_ROW_CROSSINGS);
-    ivec2 nc = ok ? ivec2(abs(c1 - c0)) : ivec2(0);   // 0 trips where not needed
+    bool ok = k >= 0 && abs(c1.x - c0.x) + abs(c1.y - c0.y) <= float(MAX_ROW_CROSSINGS);
+    ivec2 nc = ok ? ivec2(abs(c1 - c0)) : ivec2(0);   // 0 trips past the limit
     // the j-th line crossed along an axis (j = 0, 1, ...) is at the cell
     // boundary c0 + 1 + j going up, c0 - j going down
     vec2 first = (c0 + max(dir, 0.0)) * size - off;
@@ -315,7 +316,7 @@ void setFootprintSample(vec2 offset) {
 #ifdef FOOTPRINT_LAZY_ROWS
         setDirectRows(fpPixel);
 #endif
-        footprintShare = rowCoverage(footprintObject, offset.y, true);
+        footprintShare = rowCoverage(footprintObject, offset.y);
     }
 }
 
@@ -328,8 +329,9 @@ bool takesFootprint(int k, float chain, vec3 p) {
     // only the camera ray itself (chain 0): nothing of the homography stays
     // live through the ray tree
     return k == footprintObject && chain == 0.0 && footprintShare >= 0.0;
-#endif
+#else
     if (k != footprintObject || chain != footprintChainId || footprintShare < 0.0) return false;
     vec2 e = p.xz - planePoint(fpOffset);
     return chain == 0.0 || dot(e, e) <= fpTol2;
+#endif
 }
