@@ -139,6 +139,99 @@ def _overlap(a: SceneObject, b: SceneObject, tol: float) -> bool:
     return bool(np.all(np.minimum(ahi, bhi) - np.maximum(alo, blo) > tol))
 
 
+#: Flat faces closer than this (times the scene's scale) count as lying on
+#: each other: Mitsuba intersects in float32, so a gap below about 1e-6 of the
+#: scene's size cannot decide which of the two surfaces a ray meets first.
+CONTACT_TOLERANCE = 1e-5
+
+
+def _flat_faces(obj: SceneObject) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(outward unit normal, corners (k, 3) in order) of each flat face of a
+    finite solid: a box's six rectangles, a cylinder's two caps (as inscribed
+    64-gons); a sphere has none."""
+    if obj.type == "box":
+        from .reference import rotation_matrix
+
+        lo, hi = np.array(obj.min, float), np.array(obj.max, float)
+        c, h = (lo + hi) / 2, (hi - lo) / 2
+        rot = rotation_matrix(obj.rotate)
+        faces = []
+        for a in range(3):
+            b, e = (a + 1) % 3, (a + 2) % 3
+            for s in (-1.0, 1.0):
+                local = np.zeros((4, 3))
+                local[:, a] = s * h[a]
+                local[:, b] = np.array([-1, 1, 1, -1]) * h[b]
+                local[:, e] = np.array([-1, -1, 1, 1]) * h[e]
+                faces.append((s * rot[:, a], c + local @ rot.T))
+        return faces
+    if obj.type == "cylinder":
+        a = "xyz".index(obj.axis)
+        b, e = (a + 1) % 3, (a + 2) % 3
+        t = np.linspace(0.0, 2.0 * math.pi, 64, endpoint=False)
+        ring = np.zeros((64, 3))
+        ring[:, b], ring[:, e] = obj.radius * np.cos(t), obj.radius * np.sin(t)
+        base = np.array(obj.base, float)
+        axis = np.zeros(3)
+        axis[a] = 1.0
+        return [(-axis, base + ring), (axis, base + obj.height * axis + ring)]
+    return []
+
+
+def _clip_area(p: np.ndarray, q: np.ndarray) -> float:
+    """Area of the intersection of two convex polygons in 2D (Sutherland-Hodgman)."""
+    def signed(poly):
+        x, y = poly[:, 0], poly[:, 1]
+        return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
+
+    if signed(p) < 0:
+        p = p[::-1]
+    if signed(q) < 0:
+        q = q[::-1]
+    out = list(p)
+    for i in range(len(q)):
+        a, b = q[i], q[(i + 1) % len(q)]
+        edge = b - a
+        inside = [edge[0] * (v[1] - a[1]) - edge[1] * (v[0] - a[0]) >= 0 for v in out]
+        poly, n = [], len(out)
+        for k in range(n):
+            v, w = out[k], out[(k + 1) % n]
+            if inside[k]:
+                poly.append(v)
+            if inside[k] != inside[(k + 1) % n]:
+                dv, dw = (edge[0] * (v[1] - a[1]) - edge[1] * (v[0] - a[0]),
+                          edge[0] * (w[1] - a[1]) - edge[1] * (w[0] - a[0]))
+                poly.append(v + (w - v) * (dv / (dv - dw)))
+        out = poly
+        if len(out) < 3:
+            return 0.0
+    return abs(signed(np.array(out)))
+
+
+def _faces_touch(a: SceneObject, b: SceneObject, tol: float) -> bool:
+    """Whether a flat face of one solid lies on a flat face of the other (or
+    on the plane) over an area: coincident surfaces, which a physically based
+    renderer meets in an order left to float rounding."""
+    if a.type == "plane" and b.type == "plane":
+        return False
+    if b.type == "plane":
+        a, b = b, a
+    fb = _flat_faces(b)
+    if a.type == "plane":
+        return any(abs(n[1]) > 1.0 - 1e-9 and np.all(np.abs(pts[:, 1] - a.height) <= tol) for n, pts in fb)
+    for na, pa in _flat_faces(a):
+        for nb, pb in fb:
+            if abs(float(np.dot(na, nb))) < 1.0 - 1e-9 or abs(float(np.dot(na, pb[0] - pa[0]))) > tol:
+                continue
+            u = np.cross(na, [1.0, 0.0, 0.0] if abs(na[0]) < 0.9 else [0.0, 1.0, 0.0])
+            u /= np.linalg.norm(u)
+            v = np.cross(na, u)
+            flat = lambda pts: np.stack([pts @ u, pts @ v], axis=1)  # noqa: E731
+            if _clip_area(flat(pa), flat(pb)) > tol * tol:
+                return True
+    return False
+
+
 def _name(scene: Scene, i: int) -> str:
     o = scene.objects[i]
     return f"objects[{i}]" + (f" ({o.name})" if o.name else "") + f" {o.type}"
@@ -191,6 +284,15 @@ def reasons(scene: Scene) -> list[str]:
             if a < b and _overlap(scene.objects[a], scene.objects[b], tol):
                 why.append(f"{_name(scene, a)} and {_name(scene, b)}: overlapping transparent objects "
                            "(nested media) are not supported")
+    contact = CONTACT_TOLERANCE * scale
+    for a in transparent:
+        for b in range(len(scene.objects)):
+            if b != a and not (b in transparent and b < a) and _faces_touch(scene.objects[a], scene.objects[b],
+                                                                            contact):
+                why.append(f"{_name(scene, a)} and {_name(scene, b)}: a flat face of the first lies on the "
+                           "other (a physically based renderer meets coincident surfaces in an order left to "
+                           "rounding; in glassray the media decide and an opaque surface wins): leave a gap, "
+                           "or let them touch at a point or along a line")
     try:
         from .reference import contains
 
