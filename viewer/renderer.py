@@ -72,6 +72,9 @@ class Renderer:
         self._camera: dict = {}
         self._fbo_tex: moderngl.Texture | None = None
         self._footprints = None           # footprint_sampler's AdaptiveSampler
+        #: shader programs this renderer has built (a benchmark checks that
+        #: its timed renders build none)
+        self.programs_built = 0
         self.scene: Scene | None = None
         self.program: moderngl.Program | None = None
         self.set_scene(scene)
@@ -102,6 +105,7 @@ class Renderer:
         prog = self._programs.get(key)
         if prog is None:
             prog = build_program(self.ctx, vertex=vertex, defines=defines)
+            self.programs_built += 1
             self._programs[key] = prog
         return prog
 
@@ -260,6 +264,7 @@ class Renderer:
         prog = self._subset_programs.pop(key, None)
         if prog is None:
             prog = build_program(self.ctx, defines=defines)
+            self.programs_built += 1
             self._subset_of[key] = (frozenset(subset), extra_key)
         self._subset_programs[key] = prog          # most recent last
         in_use = {id(p) for plan in self._plans.values() for p, _ in plan} | {id(p) for p in keep or ()}
