@@ -147,6 +147,14 @@ def _pts(pairs):
     return out
 
 
+@pytest.mark.parametrize("value", ["0", "-5", "ten", "1.5"])
+def test_bad_peer_time_limit_is_bad_usage(tmp_path, value):
+    proc = subprocess.run([sys.executable, "-m", "viewer", "bench", "--peer", "mitsuba", "--peer-time-limit", value,
+                           "--out", str(tmp_path / "o")], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2 and "--peer-time-limit" in proc.stderr and "Traceback" not in proc.stderr
+    assert not (tmp_path / "o").exists()
+
+
 def test_time_to_error_interpolates_log_log_and_never_extrapolates():
     pts = _pts([(10.0, 0.4), (20.0, 0.2), (40.0, 0.1)])
     t, flag = peer.time_to_error(pts, 0.2 / np.sqrt(2))      # halfway in log error -> halfway in log time

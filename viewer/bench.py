@@ -941,6 +941,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "(Mitsuba 3: pip install 'glassray[peer]') on one scene that both draw identically "
                         "(default whitted-exact): error against time, time to reach an error "
                         "(peer.md, peer.csv, peer-time-to-error.csv, peer-machine.json, peer.png; see viewer/peer.py)")
+    p.add_argument("--peer-time-limit", type=_positive(86400), default=None, metavar="S",
+                   help="with --peer: a Mitsuba sample count whose first render took longer than S seconds "
+                        "ends its series (30; each count takes about twice the last)")
 
 
 def _log(msg: str) -> None:
