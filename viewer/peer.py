@@ -640,10 +640,12 @@ PEER_REFERENCE_REFINE = 8192
 PEER_QUICK_REFERENCE_SAMPLES = 16
 GLASSRAY_SPP = (1, 2, 4, 8, 16, 32, 64, 128, 256)
 #: Squares only: Mitsuba's multijitter sampler rounds other counts up to a
-#: product of two near factors (32 -> 35, 2048 -> 2070, 8192 -> 8280) and
-#: took 1.3-1.4x longer per sample on them (whitted-glass, 320x180: 13.1
-#: ms a sample at 8280 against 9.5 at 4096), which the comparison would
-#: count against it.  Up to the time limit.
+#: product of two near factors (32 -> 35, 2048 -> 2070, 8192 -> 8280), with
+#: a warning each.  Measured per sample (whitted-glass, 320x180, peerwg4):
+#: the powers of 4 took 8.7-9.5 ms of wall time, the counts 9 * 4^k
+#: 11.0-11.8 ms (the rounded counts of the earlier series: 12.4-13.1 ms), so
+#: the README also gives the ratio at the 4096 point's rate.  Up to the time
+#: limit.
 MITSUBA_SPP = (1, 4, 9, 16, 36, 64, 144, 256, 576, 1024, 2304, 4096, 9216, 16384)
 #: The adaptive series: `render --adaptive --samples N` at the default
 #: target error, N = each of these budgets (mean rays per pixel).
