@@ -213,8 +213,10 @@ def test_adaptive_setting_with_huge_target_is_one_centred_sample(gl, monkeypatch
     huge = bench.Setting("adaptive huge", base.max_depth, 4, base.min_weight, adaptive=1e9)
     tight = bench.Setting("adaptive tight", base.max_depth, 4, base.min_weight, adaptive=1e-6)
     results = bench.bench_scene(gl, scene, "flat-floor", [base, huge, tight], w, h, 2, one)
-    # warm-up and 2 timed renders each, at the bench's seed
-    assert sorted(calls) == sorted([(w, h, 4, 1e9, bench.RENDER_SEED)] * 3 + [(w, h, 4, 1e-6, bench.RENDER_SEED)] * 3)
+    # warm-up renders (until one compiles nothing) and 2 timed renders each, at the bench's seed
+    assert set(calls) == {(w, h, 4, 1e9, bench.RENDER_SEED), (w, h, 4, 1e-6, bench.RENDER_SEED)}
+    for target in (1e9, 1e-6):
+        assert 1 + 2 <= sum(c[3] == target for c in calls) <= bench.WARM_UP_RENDERS + 2
     res = {x.setting.label: x for x in results}
     assert res["adaptive huge"].mean_spp == 1.0
     assert res["adaptive huge"].errors["rmse"] == 0.0 and res["adaptive huge"].errors["max_abs"] == 0.0
@@ -356,6 +358,8 @@ def test_bench_end_to_end(quick_run):
     assert info["size"] == "32x18"
     assert set(info["speedup_specialised_vs_generic"]) == {"default", "bench-opaque"}
     assert set(info["default_on_pareto_front"]["default"]) == {"wall", "cpu"}
+    assert info["programs_built_in_timed_rounds"] == {"default": 0, "bench-opaque": 0}
+    assert "timed renders built shader programs" not in proc.stderr
     for scene in ("default", "bench-opaque"):
         on = info["adaptive_on_pareto_front"][scene]
         assert set(on) == {"wall", "cpu"}
@@ -526,3 +530,53 @@ def test_timed_renders_compile_nothing(gl, monkeypatch):
         assert built == []
     finally:
         pool.release()
+
+
+def test_bench_scene_warms_up_until_nothing_compiles(gl, monkeypatch):
+    """bench_scene's warm-up renders a setting until a render builds no
+    program, so its timed renders build none.  One sample at 160x90 draws
+    the default scene's culling plan in one draw, which compiles one variant
+    (COMPILES_PER_DRAW): one untimed render left the others to the first
+    timed rounds (4 of 24 timed renders of `glassray bench default --quick
+    --size 160x90` compiled)."""
+    import viewer.renderer as renderer_module
+    from viewer.scene import load_scene
+
+    built = []
+    real = renderer_module.build_program
+    monkeypatch.setattr(renderer_module, "build_program", lambda *a, **k: built.append(1) or real(*a, **k))
+    scene = load_scene("default")
+    st = bench.Setting("samples=1", scene.render.max_depth, 1, scene.render.min_weight)
+    warm = []
+    real_warm = bench.warm_up
+    monkeypatch.setattr(bench, "warm_up", lambda r, run: warm.append(r) or real_warm(r, run))
+    ref = np.zeros((90, 160, 3), np.float32)
+    (res,) = bench.bench_scene(gl, scene, "default", [st], 160, 90, 2, ref)
+    assert len(warm) == 1
+    assert len(built) >= 3          # the plan's variants: one untimed render would not build them all
+    assert res.built_in_timed == 0
+    assert len(res.times) == 2 and res.errors["rmse"] > 0
+
+
+def test_warm_up_stops_when_nothing_is_built_and_gives_up_at_the_limit():
+    class Fake:
+        programs_built = 0
+
+    r = Fake()
+    left = [3]
+
+    def run():                      # builds one program per render while any are left
+        if left[0]:
+            left[0] -= 1
+            r.programs_built += 1
+        return r.programs_built
+
+    assert bench.warm_up(r, run) == 3 and left == [0]       # 3 renders that built, 1 that did not
+    r.programs_built, calls = 0, []
+
+    def always():
+        calls.append(1)
+        r.programs_built += 1
+        return len(calls)
+
+    assert bench.warm_up(r, always) == bench.WARM_UP_RENDERS == len(calls)

@@ -16,8 +16,10 @@ converged float64 reference image:
   reported next to the budget.  The Pareto front is one front over uniform
   and adaptive settings together.
 
-* time: one warm-up render per setting (its image is the one compared), then
-  ``--repeat`` timed renders, each finished on the GPU before the clock stops
+* time: untimed warm-up renders per setting until one compiles no shader
+  program (``warm_up``; the last one's image is the one compared), then
+  ``--repeat`` timed renders (machine.json counts the programs they built:
+  ``programs_built_in_timed_rounds``, 0 unless the warm-up gave up), each finished on the GPU before the clock stops
   (the read-back waits for it).  The timed renders are interleaved in rounds
   (every setting once per round, the order reversed every other round), so a
   burst of load from other processes spreads over all settings instead of
@@ -445,6 +447,8 @@ class Result(Timings):
     front_uniform: dict[str, bool | None] = field(default_factory=dict)
     #: samples per pixel used on average (adaptive: measured; uniform: samples)
     mean_spp: float | None = None
+    #: shader programs its timed renders built (0 unless warm_up gave up)
+    built_in_timed: int = 0
 
     @property
     def spp_used(self) -> float:
@@ -507,6 +511,29 @@ def _render_setting(renderer, setting: Setting, w: int, h: int) -> tuple[np.ndar
     return res.image, res.mean_spp
 
 
+#: warm_up's most renders of one setting (a culling plan of the default
+#: scene has at most a few dozen groups; a render compiles at least one)
+WARM_UP_RENDERS = 8
+
+
+def warm_up(renderer, run):
+    """run() until a render builds no shader program; returns the last
+    result (the finished image: the earlier ones drew groups whose variant
+    was not compiled yet with a superset, the same image to float rounding).
+    A render compiles at most Renderer.COMPILES_PER_DRAW culling variants
+    per draw, so one untimed render is not enough to keep the timed ones
+    from compiling (a compile on llvmpipe takes up to a second); stops
+    after WARM_UP_RENDERS renders whatever they built."""
+    built = renderer.programs_built
+    result = run()
+    for _ in range(WARM_UP_RENDERS - 1):
+        if renderer.programs_built == built:
+            break
+        built = renderer.programs_built
+        result = run()
+    return result
+
+
 def _timed_render(renderer, setting: Setting, w: int, h: int) -> tuple[float, float]:
     """(wall ms, process CPU ms) of one render, finished on the GPU: all of
     Renderer.render, or all of render_adaptive (every pass and the NumPy
@@ -523,17 +550,17 @@ def _timed_render(renderer, setting: Setting, w: int, h: int) -> tuple[float, fl
 def bench_scene(ctx, scene, stem: str, settings: list[Setting], width: int, height: int, repeat: int,
                 reference: np.ndarray, log=None, time_tol: float = DEFAULT_TIME_TOLERANCE,
                 error_tol: float = DEFAULT_ERROR_TOLERANCE) -> list[Result]:
-    """Warm-up render (the image compared with the reference; for adaptive
-    settings also the mean samples per pixel used, which is deterministic
-    for the seed) of every setting, then ``repeat`` interleaved rounds of
-    timed renders."""
+    """Warm-up renders (warm_up; the last one's image is the one compared
+    with the reference; for adaptive settings also the mean samples per
+    pixel used, which is deterministic for the seed) of every setting, then
+    ``repeat`` interleaved rounds of timed renders."""
     pool = _Renderers(ctx)
     results: list[Result] = []
     try:
         for st in settings:
             w, h = render_size(st, width, height)
             r = pool.get(scene, st)
-            img, mean_spp = _render_setting(r, st, w, h)
+            img, mean_spp = warm_up(r, lambda: _render_setting(r, st, w, h))
             if (w, h) != (width, height):
                 img = upscale(img, width, height)
             res = Result(stem, st, w, h, errors=image_errors(img, reference), mean_spp=mean_spp)
@@ -544,7 +571,9 @@ def bench_scene(ctx, scene, stem: str, settings: list[Setting], width: int, heig
             for res in order:
                 st = res.setting
                 r = pool.get(scene, st)
+                built = r.programs_built
                 wall, cpu = _timed_render(r, st, res.width, res.height)
+                res.built_in_timed += r.programs_built - built
                 res.times.append(wall)
                 res.cpu_times.append(cpu)
             if log is not None:
@@ -1080,6 +1109,10 @@ def _run(args, ctx, backend, scenes, width, height, ref_samples, out: Path) -> i
                               log=_log if not args.quick else None, time_tol=args.time_tolerance,
                               error_tol=args.error_tolerance)
         _log(f"{stem}: done in {time.perf_counter() - t0:.1f} s")
+        compiling = [r.setting.label for r in results if r.built_in_timed]
+        if compiling:
+            _log(f"{stem}: warning: timed renders built shader programs ({', '.join(compiling)}): "
+                 f"their times include compiling")
         by_scene[stem] = results
         titles[stem] = f"{stem}: {scene.name}"
         all_results.extend(results)
@@ -1098,6 +1131,8 @@ def _run(args, ctx, backend, scenes, width, height, ref_samples, out: Path) -> i
         stem: next((dict(r.front) for r in res if r.setting.label == "default"), None)
         for stem, res in by_scene.items()}
     info["adaptive_on_pareto_front"] = {stem: adaptive_on_front(res) for stem, res in by_scene.items()}
+    info["programs_built_in_timed_rounds"] = {stem: sum(r.built_in_timed for r in res)
+                                              for stem, res in by_scene.items()}
 
     from .scene import write_atomic
 

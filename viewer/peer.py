@@ -898,16 +898,8 @@ def run_bench(args, ctx, backend: str, name: str, scene, width: int, height: int
             if sname == "mitsuba":
                 continue
             for p in pts:
-                built = renderer.programs_built
-                res = p.run()
-                # a render compiles at most COMPILES_PER_DRAW culling variants (drawing the rest with
-                # a superset meanwhile): render again until nothing is left to compile, so that no
-                # timed render compiles and each first render's image is the finished one
-                for _ in range(8):
-                    if renderer.programs_built == built:
-                        break
-                    built = renderer.programs_built
-                    res = p.run()
+                # rendered again until nothing is left to compile: no timed render compiles
+                res = bench.warm_up(renderer, p.run)
                 if sname == "glassray adaptive":
                     img = res.image
                     p.effective_spp = res.rays / res.spp.size     # rays per pixel, the corner rays included
