@@ -1068,7 +1068,8 @@ def _run(args, ctx, backend, scenes, width, height, ref_samples, out: Path) -> i
     header = [f"glassray bench {info['date']}",
               f"machine: {info['cpu']} ({info['cpus_usable']} usable CPUs), {info['platform']}",
               f"GL: {info['gl']} via {backend}",
-              f"size {width}x{height}, median of {args.repeat} interleaved timed renders after a warm-up; "
+              f"size {width}x{height}, median of {args.repeat} interleaved timed renders after untimed "
+              f"warm-up renders (until one compiles nothing); "
               f"Pareto front of time against RMSE with differences under {100 * args.time_tolerance:g}% in time "
               f"and {100 * args.error_tolerance:g}% in RMSE as ties; front column: ** on both clocks, "
               f"w wall clock only, c CPU time only",
