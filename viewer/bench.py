@@ -18,12 +18,12 @@ converged float64 reference image:
 
 * time: untimed warm-up renders per setting until one compiles no shader
   program (``warm_up``; the last one's image is the one compared), then
-  ``--repeat`` timed renders (machine.json counts the programs they built:
-  ``programs_built_in_timed_rounds``, 0 unless the warm-up gave up), each finished on the GPU before the clock stops
-  (the read-back waits for it).  The timed renders are interleaved in rounds
-  (every setting once per round, the order reversed every other round), so a
-  burst of load from other processes spreads over all settings instead of
-  landing on one.  Two clocks, medians of both: wall-clock frame time, and
+  ``--repeat`` timed renders, each finished on the GPU before the clock
+  stops (the read-back waits for it); machine.json counts the programs they
+  built (``programs_built_in_timed_rounds``: 0 unless the warm-up gave up).
+  The timed renders are interleaved in rounds (every setting once per
+  round, the order reversed every other round), so a burst of load from
+  other processes spreads over all settings instead of landing on one.  Two clocks, medians of both: wall-clock frame time, and
   the process's CPU time (all threads: on a software renderer such as
   llvmpipe, the work done, which other load on the machine hardly changes;
   on a hardware GPU it is only the driver's share and means little).  A
@@ -511,8 +511,10 @@ def _render_setting(renderer, setting: Setting, w: int, h: int) -> tuple[np.ndar
     return res.image, res.mean_spp
 
 
-#: warm_up's most renders of one setting (a culling plan of the default
-#: scene has at most a few dozen groups; a render compiles at least one)
+#: warm_up's most renders of one setting: an image is drawn with at most
+#: culling.MAX_VARIANTS (4) variants per kind of pass (uniform, footprint,
+#: adaptive first and list passes), and a render compiles at least one of
+#: each kind it draws
 WARM_UP_RENDERS = 8
 
 
