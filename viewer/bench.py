@@ -23,8 +23,9 @@ converged float64 reference image:
   built (``programs_built_in_timed_rounds``: 0 unless the warm-up gave up).
   The timed renders are interleaved in rounds (every setting once per
   round, the order reversed every other round), so a burst of load from
-  other processes spreads over all settings instead of landing on one.  Two clocks, medians of both: wall-clock frame time, and
-  the process's CPU time (all threads: on a software renderer such as
+  other processes spreads over all settings instead of landing on one.
+  Two clocks, medians of both: wall-clock frame time, and the process's
+  CPU time (all threads: on a software renderer such as
   llvmpipe, the work done, which other load on the machine hardly changes;
   on a hardware GPU it is only the driver's share and means little).  A
   resolution-scaled setting is timed at its reduced size (the upscale,
@@ -974,7 +975,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "(peer.md, peer.csv, peer-time-to-error.csv, peer-machine.json, peer.png; see viewer/peer.py)")
     p.add_argument("--peer-time-limit", type=_positive(86400), default=None, metavar="S",
                    help="with --peer: a Mitsuba sample count whose first render took longer than S seconds "
-                        "ends its series (30; each count takes about twice the last)")
+                        "ends its series (30; the next count is 2.25-4 times as many samples)")
 
 
 def _log(msg: str) -> None:
