@@ -66,6 +66,11 @@ class CullPlan:
     groups: tuple[tuple[tuple[int, ...], tuple[tuple[int, int, int, int], ...]], ...]
 
 
+#: Culling works in float64 with squared lengths: a scene with a coordinate
+#: or size beyond this (valid, but not drawn faithfully in float32) is not culled.
+CULL_LIMIT = 1e150
+
+
 def _unit(v: np.ndarray) -> np.ndarray:
     return v / np.linalg.norm(v, axis=-1, keepdims=True)
 
@@ -111,7 +116,8 @@ def support(obj, n: np.ndarray) -> np.ndarray:
     if obj.type == "box":
         lo, hi = np.array(obj.min, float), np.array(obj.max, float)
         rot = rotation_world_from_local(obj.rotate)        # columns: the box's axes
-        return n @ ((lo + hi) / 2) + np.abs(n @ rot) @ ((hi - lo) / 2)
+        # halves first: a valid box may span more than float64's 1.8e308
+        return n @ (lo / 2 + hi / 2) + np.abs(n @ rot) @ (hi / 2 - lo / 2)
     axis = np.zeros(3)
     axis[AXES[obj.axis]] = 1.0
     base = np.array(obj.base, float)
@@ -178,6 +184,11 @@ def tile_subsets(scene: Scene, width: int, height: int, tile: int = TILE) -> tup
     spheres = np.array([bounding_sphere(o, eye) for o in objs], dtype=np.float64)
     centres = spheres[:, :3] + eye
     radii = np.where(spheres[:, 3] >= 0, spheres[:, 3] + pad, -1.0)
+    light_points = [lt.position for lt in scene.lights if lt.position is not None]
+    if not np.all(np.abs([*centres.ravel(), *radii, *np.ravel(light_points), pad]) < CULL_LIMIT):
+        # squares of such lengths overflow float64: every tile gets every
+        # object (conservative; such a scene is not drawn faithfully anyway)
+        return np.zeros((ty, tx), np.int32), [tuple(range(n))]
     planes = [k for k, o in enumerate(objs) if o.type == "plane"]
     scatters = np.array([scene.scatters(o) for o in objs])
     holds_eye = [k for k, o in enumerate(objs) if scene.is_transparent(o) and contains_point(o, eye)]

@@ -11,6 +11,7 @@ eye's (x, z) modulo 2 * size (the period of the parity).
 
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import dataclass
 
@@ -59,22 +60,143 @@ def contains_point(obj: SceneObject, p: np.ndarray) -> bool:
     p = np.asarray(p, dtype=np.float64)
     if obj.type == "plane":
         return bool(p[1] < obj.height)
+    # distances by hypot, not squares: a valid radius may be 1e200
     if obj.type == "sphere":
-        return bool(np.sum((p - obj.center) ** 2) < obj.radius ** 2)
+        return bool(math.hypot(*(p / 2 - np.array(obj.center) / 2)) < obj.radius / 2)
     if obj.type == "box":
         c = (np.array(obj.min) + np.array(obj.max)) / 2
         half = (np.array(obj.max) - np.array(obj.min)) / 2
         q = rotation_world_from_local(obj.rotate).T @ (p - c)
         return bool(np.all(np.abs(q) < half))
     ax = AXES[obj.axis]
-    q = p - np.array(obj.base)
+    q = p / 2 - np.array(obj.base) / 2                  # halves: no overflow
     along = q[ax]
-    rho2 = float(np.sum(np.delete(q, ax) ** 2))
-    inside = rho2 < obj.radius ** 2 and 0 < along < obj.height
+    rho = math.hypot(*np.delete(q, ax))
+    inside = rho < obj.radius / 2 and 0 < along < obj.height / 2
     if obj.wall is not None:
         ri = obj.radius - obj.wall
-        inside = inside and not (rho2 < ri ** 2 and along > obj.wall)
+        inside = inside and not (rho < ri / 2 and along > obj.wall / 2)
     return inside
+
+
+# ---------------------------------------------------------------- units for the GPU
+#
+# The shader computes in float32, whose squares of lengths overflow past about
+# 1e19 and flush to zero below about 1e-19.  A scene at such a scale (valid: the
+# format sets no unit) is therefore uploaded in units where the camera's
+# distance to its target is about 1: every length is multiplied by the same
+# power of two, which is exact in binary floating point, the shader's epsilons
+# are relative to the scene's size, and absorption (per unit length) is
+# divided by it, so the picture is that of the scene as written.  Inside
+# GPU_DISTANCE_RANGE nothing changes (bit for bit).
+GPU_DISTANCE_RANGE = (2.0 ** -20, 2.0 ** 20)
+F32_MAX = float(np.finfo(np.float32).max)
+
+
+def camera_distance_exponent(scene: Scene) -> int:
+    """e with |target - position| in [2^(e-1), 2^e) (frexp's exponent),
+    computed without overflow or underflow for any finite camera."""
+    c = scene.camera
+    s = max(abs(float(v)) for v in (*c.position, *c.target))
+    # s > 0: validation keeps position != target
+    hyp = math.hypot(*(t / s - p / s for t, p in zip(c.target, c.position)))
+    return math.frexp(s)[1] + math.frexp(hyp)[1] - 1
+
+
+def gpu_length_exponent(scene: Scene) -> int:
+    """k such that the GPU gets the scene's lengths times 2^k: 0 when the
+    camera's distance to its target lies in GPU_DISTANCE_RANGE, else the k
+    that brings it to [1, 2)."""
+    e = camera_distance_exponent(scene)
+    lo, hi = (math.frexp(v)[1] for v in GPU_DISTANCE_RANGE)
+    return 0 if lo <= e <= hi else 1 - e
+
+
+def scaled_scene(scene: Scene, k: int) -> Scene:
+    """A copy of `scene` with every length times 2^k (positions, sizes,
+    checker squares) and absorption times 2^-k; the same scene when k == 0."""
+    if k == 0:
+        return scene
+
+    def vec(v):
+        return tuple(math.ldexp(float(c), k) for c in v)
+
+    out = copy.deepcopy(scene)
+    out.camera.position, out.camera.target = vec(out.camera.position), vec(out.camera.target)
+    for lt in out.lights:
+        if lt.position is not None:
+            lt.position = vec(lt.position)
+    for m in out.materials.values():
+        m.absorption = tuple(math.ldexp(float(c), -k) for c in m.absorption)
+        if m.checker is not None:
+            m.checker.size = math.ldexp(m.checker.size, k)
+    for o in out.objects:
+        o.height, o.radius = math.ldexp(o.height, k), math.ldexp(o.radius, k)
+        o.center, o.min, o.max, o.base = vec(o.center), vec(o.min), vec(o.max), vec(o.base)
+        if o.wall is not None:
+            o.wall = math.ldexp(o.wall, k)
+    return out
+
+
+# Lengths squared must stay below float32's 3.4e38 in the shader, and the
+# culling's float64 geometry (viewer/culling.py) loses a length's 1e-16 of
+# itself.  A point light or a plane further from the eye than GPU_REACH times
+# the camera's distance to its target is brought to that distance: a light
+# along the same direction (it has no fall-off, and seen from anything within
+# 1000 camera distances its direction changes by less than 1e-9 rad), a plane
+# to that height (a ray down toward a plane 1e300 below still meets it, as it
+# should).  A sphere, box or cylinder that large cannot be held by float32
+# near the eye and is not drawn faithfully (README, implementation limits).
+# Measured: a light brought to 2^40 camera distances shadows as a directional
+# one does; brought to 2^60, the culling left a piece of a shadow out (18
+# pixels of 96x54 lit; tests/test_scale.py).
+GPU_REACH = 2.0 ** 40
+
+
+def reached_scene(scene: Scene, reach: float = GPU_REACH) -> Scene:
+    """`scene` with its far point lights and planes brought within `reach`
+    camera distances of the eye (see GPU_REACH); the same scene when nothing
+    is that far, as in any ordinary scene."""
+    reach = math.ldexp(reach, camera_distance_exponent(scene))
+    eye = np.array(scene.camera.position, dtype=np.float64)
+    out = None
+
+    def copied() -> Scene:
+        nonlocal out
+        out = out or copy.deepcopy(scene)
+        return out
+
+    for j, lt in enumerate(scene.lights):
+        if lt.position is None:
+            continue
+        v = np.array(lt.position) / 2 - eye / 2          # halves: no overflow
+        m = float(np.max(np.abs(v)))
+        if m > reach / 2:
+            u = np.array(unit_vector(v))
+            copied().lights[j].position = tuple(eye + u * reach)
+    for k, o in enumerate(scene.objects):
+        if o.type == "plane" and abs(o.height / 2 - eye[1] / 2) > reach / 2:
+            copied().objects[k].height = float(eye[1] + math.copysign(reach, o.height / 2 - eye[1] / 2))
+    return out or scene
+
+
+def gpu_frame_scene(scene: Scene) -> tuple[Scene, int]:
+    """The scene as the GPU gets it, and the k of its lengths' 2^k: scaled
+    (scaled_scene) and then brought within reach (reached_scene).  For any
+    ordinary scene, `scene` itself and 0."""
+    k = gpu_length_exponent(scene)
+    return reached_scene(scaled_scene(scene, k)), k
+
+
+def _saturate(a: np.ndarray) -> np.ndarray:
+    """Float fields that overflowed float32 (validation admits only finite
+    numbers, so an inf here is a value beyond 3.4e38) at +-F32_MAX instead:
+    inf would turn into NaN where it meets a 0 (inf * 0, inf - inf)."""
+    for name in a.dtype.names:
+        f = a[name]
+        if f.dtype.kind == "f":
+            np.clip(f, -F32_MAX, F32_MAX, out=f)
+    return a
 
 
 def scene_scale(scene: Scene) -> float:
@@ -89,7 +211,8 @@ def scene_scale(scene: Scene) -> float:
         elif o.type == "cylinder":
             pts += [np.array(o.base) - o.radius, np.array(o.base) + o.radius + o.height]
     pts = np.array(pts)
-    return float(max(np.max(pts.max(axis=0) - pts.min(axis=0)), 1e-30))
+    with np.errstate(over="ignore"):        # a box 1e308 across: inf (not drawn faithfully anyway)
+        return float(max(np.max(pts.max(axis=0) - pts.min(axis=0)), 1e-30))
 
 
 def bounding_sphere(obj: SceneObject, eye: np.ndarray) -> tuple[float, float, float, float]:
@@ -101,7 +224,8 @@ def bounding_sphere(obj: SceneObject, eye: np.ndarray) -> tuple[float, float, fl
         c, r = np.array(obj.center), obj.radius
     elif obj.type == "box":
         lo, hi = np.array(obj.min), np.array(obj.max)
-        c, r = (lo + hi) / 2, float(np.linalg.norm(hi - lo)) / 2   # rotation about c keeps it
+        with np.errstate(over="ignore"):    # as in scene_scale
+            c, r = (lo + hi) / 2, float(np.linalg.norm(hi - lo)) / 2   # rotation about c keeps it
     else:
         axis = np.zeros(3)
         axis[AXES[obj.axis]] = 1.0
@@ -190,6 +314,11 @@ def shader_defines(scene: Scene, specialise: bool = True, fresnel: str = "exact"
 def pack_scene(scene: Scene, specialise: bool = True, fresnel: str = "exact") -> PackedScene:
     """The uniform block's bytes and the shader defines.  The generic shader
     (specialise=False) takes the same data in arrays of fixed length."""
+    with np.errstate(over="ignore"):        # values beyond float32 saturate (_saturate)
+        return _pack_scene(scene, specialise, fresnel)
+
+
+def _pack_scene(scene: Scene, specialise: bool, fresnel: str) -> PackedScene:
     if not specialise and (len(scene.objects) > GENERIC_LENS["OBJECTS_LEN"]
                            or len(scene.materials) > GENERIC_LENS["MATERIALS_LEN"]
                            or len(scene.lights) > GENERIC_LENS["LIGHTS_LEN"]):
@@ -270,7 +399,7 @@ def pack_scene(scene: Scene, specialise: bool = True, fresnel: str = "exact") ->
             return out
         objs, mats = pad(objs, GENERIC_LENS["OBJECTS_LEN"]), pad(mats, GENERIC_LENS["MATERIALS_LEN"])
         lights, media = pad(lights, GENERIC_LENS["LIGHTS_LEN"]), pad(media, GENERIC_LENS["MEDIA_LEN"])
-    block = b"".join([objs.tobytes(), mats.tobytes(), lights.tobytes(), media.tobytes(), tail.tobytes()])
+    block = b"".join(_saturate(a).tobytes() for a in (objs, mats, lights, media, tail))
     return PackedScene(block=block, defines=shader_defines(scene, specialise, fresnel), eye=eye)
 
 
@@ -278,7 +407,12 @@ def camera_uniforms(scene: Scene, width: int, height: int) -> dict[str, tuple[fl
     """f, right * t * W/H and up * t of the spec's pinhole model (float64 math)."""
     c = scene.camera
     f = np.array(c.target, dtype=np.float64) - np.array(c.position, dtype=np.float64)
-    f /= np.linalg.norm(f)
+    n = np.linalg.norm(f)
+    if 0 < n < math.inf:
+        f /= n
+    else:                  # a camera beyond float64's squares (the renderer's scenes never are)
+        s = max(abs(v) for v in (*c.target, *c.position))
+        f = np.array(unit_vector([t / s - p / s for t, p in zip(c.target, c.position)]))
     right = np.cross(f, [0.0, 1.0, 0.0])
     right /= np.linalg.norm(right)
     up = np.cross(right, f)

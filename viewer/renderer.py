@@ -15,7 +15,7 @@ from typing import Callable
 import moderngl
 import numpy as np
 
-from .gpu_scene import camera_uniforms, pack_scene
+from .gpu_scene import F32_MAX, camera_uniforms, gpu_frame_scene, pack_scene
 from . import interrupt
 from .imageio import read_sky_image
 from .sampling import sample_offsets
@@ -82,7 +82,14 @@ class Renderer:
     # ------------------------------------------------------------ scene
 
     def set_scene(self, scene: Scene) -> None:
-        """Upload a scene; recompiles only when its feature key changes."""
+        """Upload a scene; recompiles only when its feature key changes.
+
+        `self.scene` is the scene in the GPU's units: `scene` itself, or for
+        a scene far outside float32's comfortable scale, a copy with its
+        lengths times 2^length_exponent and its far lights and planes
+        brought within reach of the eye (gpu_scene.gpu_frame_scene); the
+        image is the same."""
+        scene, self.length_exponent = gpu_frame_scene(scene)
         packed = pack_scene(scene, self.specialise, self.fresnel)
         self._defines = {**packed.defines, **self.extra_defines}
         self.program = self._main = self._program(self._defines)
@@ -417,7 +424,10 @@ class Renderer:
         For comparing intersection code ray by ray with the reference."""
         hit, normal = (self._debug_pass(mode, width, height, offset) for mode in (1, 2))
         obj = hit[..., 1].round().astype(np.int32)
-        t = np.where(obj >= 0, hit[..., 0], np.inf).astype(np.float32)
+        # back to the scene's own units (an exact power of two; see set_scene),
+        # finite wherever something is hit
+        t = np.ldexp(hit[..., 0].astype(np.float64), -self.length_exponent)
+        t = np.where(obj >= 0, np.minimum(t, F32_MAX), np.inf).astype(np.float32)
         return t, obj, np.ascontiguousarray(normal[..., :3])
 
     def ray_cost(self, width: int, height: int, offset: tuple[float, float] = (0.5, 0.5)) -> np.ndarray:
