@@ -124,7 +124,7 @@ def probe(args) -> int:
 
 
 def run(args) -> int:
-    from .cli import Failure, _load
+    from .cli import Failure, _load, size_failure
 
     scene = _load(args)
     try:
@@ -133,6 +133,13 @@ def run(args) -> int:
         raise Failure(str(e)) from None
     try:
         return viewer.run()
+    except Exception as e:
+        # a window larger than the driver can back with framebuffers fails
+        # at its first frame (Progressive.resize, which set the size it tried)
+        too_large = size_failure(e, *viewer.prog.size) if viewer.prog is not None else None
+        if too_large is None:
+            raise
+        raise too_large from e
     finally:
         viewer.close()
 
@@ -358,7 +365,11 @@ class Viewer:
 
     def run(self) -> int:
         gl_start = rss_start = None
-        warm = max(50, self.soak // 5)
+        # the GL objects and memory are counted after the warm-up (caches
+        # filled) and at the end; a short soak (a smoke run) warms up for
+        # half its frames, so that both counts are taken and some frames
+        # lie between them
+        warm = min(max(50, self.soak // 5), self.soak // 2)
         while not glfw.window_should_close(self.window):
             self._wait()
             interrupt.check()         # Ctrl-C in the terminal (deferred: viewer/interrupt.py)
@@ -382,11 +393,12 @@ class Viewer:
             self.ctx.finish()
             gl_end, rss_end = gl_object_counts(self.ctx, self.prog), _rss_kb()
             variants_end = len(self.renderer._subset_programs)
-            moving = sorted(self._preview_frames) or [0.0]
+            moving = sorted(self._preview_frames)      # none in a soak of 11 frames or fewer
+            moving_ms = f"{moving[len(moving) // 2]:.1f}" if moving else "n/a"
             print(f"soak: frames={self.frames} warmup={warm} rss_kb={rss_start}->{rss_end} "
                   f"gl_objects={sum(gl_start.values())}->{sum(gl_end.values())} "
                   f"culling_variants={variants_start}->{variants_end}/{self.renderer.SUBSET_PROGRAMS} "
-                  f"moving_frame_ms_median={moving[len(moving) // 2]:.1f} "
+                  f"moving_frame_ms_median={moving_ms} "
                   f"preview={self.prog.preview_size} detail={gl_start}->{gl_end}", flush=True)
         return 0
 

@@ -286,6 +286,10 @@ def cmd_render(args) -> int:
         raise UsageError(f"{args.output}: {what} (expected .png, .npy or .pfm)")
     scene = _load(args)
     parent = out.parent if str(out.parent) else Path(".")
+    # every check of the output that is cheap and certain comes before the
+    # render (which can take minutes); the atomic write stays the real one
+    if out.is_dir():
+        raise Failure(f"{args.output}: cannot write: it is a folder, not a file")
     if not parent.is_dir():
         what = "is a file, not a folder" if parent.exists() else "does not exist"
         raise Failure(f"{args.output}: cannot write: folder {parent} {what}")
@@ -299,6 +303,10 @@ def cmd_render(args) -> int:
     adaptive = _adaptive(args)
     if args.view == "samples" and not adaptive:      # bad usage: before any OpenGL
         raise UsageError("--view samples shows an adaptive render's samples per pixel; drop --no-adaptive")
+    if args.timing and args.view != "color":
+        # the spec's line is the time of the image; a debug picture's would
+        # pass for it and tell nothing about rendering
+        raise UsageError(f"--timing times the colour image; it does not apply to --view {args.view}")
 
     from .context import ContextError, create_offscreen_context
     from .renderer import Renderer
@@ -322,6 +330,7 @@ def cmd_render(args) -> int:
     except BaseException:
         ctx.release()
         raise
+    timing = None
     try:
         if adaptive:
             from .adaptive import DEFAULT_TARGET_ERROR, render_adaptive
@@ -344,11 +353,14 @@ def cmd_render(args) -> int:
             print(f"render: adaptive, {result.mean_spp:.2f} samples per pixel on average "
                   f"(budget {samples}, target error {target:g})", file=sys.stderr)
         if args.timing:
-            times = time_frames(draw, args.repeat)
-            med = statistics.median(times)
+            med = statistics.median(time_frames(draw, args.repeat))
             # exactly the spec's line (the adaptive line above tells the mode)
-            print(f"render: {med:.1f} ms per frame (median of {args.repeat}, {w}x{h}, {samples} samples)",
-                  file=sys.stderr)
+            timing = f"render: {med:.1f} ms per frame (median of {args.repeat}, {w}x{h}, {samples} samples)"
+    except Exception as e:
+        too_large = size_failure(e, w, h)
+        if too_large is None:
+            raise
+        raise too_large from e
     finally:
         renderer.release()
         ctx.release()
@@ -356,7 +368,30 @@ def cmd_render(args) -> int:
         write_image(out, image)
     except OSError as e:
         raise Failure(f"{args.output}: cannot write: {e.strerror or e}") from e
+    if timing is not None:
+        print(timing, file=sys.stderr)       # the last line on stderr, whatever came before
     return 0
+
+
+#: How moderngl words a framebuffer (or texture) the driver could not
+#: allocate: llvmpipe answers INCOMPLETE_ATTACHMENT for one too large for
+#: its memory (16384x8192 RGBA32F and up); a driver may say GL_OUT_OF_MEMORY.
+_ALLOCATION_ERRORS = ("framebuffer is not complete", "out of memory", "out_of_memory")
+
+
+def size_failure(e: BaseException, w: int, h: int) -> Failure | None:
+    """The Failure to report when e is the OpenGL driver (or the host)
+    failing to allocate an image of w x h; None for any other error.  Shared
+    by render and the viewer (whose window size is the framebuffer's)."""
+    import moderngl
+
+    if isinstance(e, MemoryError):
+        return Failure(f"cannot render {w}x{h}: not enough memory for an image of that size "
+                       "(try a smaller --size)")
+    if isinstance(e, moderngl.Error) and any(t in str(e).lower() for t in _ALLOCATION_ERRORS):
+        return Failure(f"cannot render {w}x{h}: the OpenGL driver could not allocate a framebuffer of "
+                       f"that size (try a smaller --size; the driver said: {e})")
+    return None
 
 
 def time_frames(draw, repeat: int) -> list[float]:

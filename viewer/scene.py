@@ -14,6 +14,7 @@ import datetime
 import math
 import os
 import re
+import stat
 import tempfile
 import tomllib
 from dataclasses import dataclass, field, replace
@@ -135,6 +136,9 @@ class Scene:
     materials: dict[str, Material] = field(default_factory=dict)
     objects: list[SceneObject] = field(default_factory=list)
     path: Path | None = None  # the file it came from, if any
+    # how error messages name it: the file as given, or the built-in scene
+    # (not compared: the same scene from another place is equal)
+    source: str | None = field(default=None, compare=False)
 
     def material_of(self, obj: SceneObject) -> Material:
         return self.materials[obj.material]
@@ -362,6 +366,9 @@ def _sky(ctx: _Ctx, t: dict, base_dir: Path | None) -> Sky:
             raise ctx.fail("sky.image", f"expected a .png, .jpg, .jpeg or .pfm picture, got {s.image!r}")
         if p.is_dir():
             raise ctx.fail("sky.image", f"{p} is a folder, not a picture")
+        if p.exists() and not p.is_file():
+            # a device or a named pipe: decoding would read it forever or wait for a writer
+            raise ctx.fail("sky.image", f"{p} is not a regular file, not a picture")
         if not p.is_file():
             raise ctx.fail("sky.image", f"no such file: {p}")
         from .imageio import ImageReadError, read_sky_image   # (imageio imports this module)
@@ -584,15 +591,7 @@ def load_scene(spec: str | os.PathLike | None = None) -> Scene:
         raise SceneError(f"{str(spec)!r}: empty scene path (give a scene file or a built-in scene name)")
     path = resolve_scene_path(spec)
     source = str(spec) if spec is not None else f"<default scene> {path}"
-    try:
-        raw = path.read_bytes()
-    except FileNotFoundError:
-        names = ", ".join(builtin_scene_names())
-        raise SceneError(f"{spec}: no such scene file (built-in scenes: {names})") from None
-    except IsADirectoryError:
-        raise SceneError(f"{spec}: is a directory, not a scene file") from None
-    except OSError as e:
-        raise SceneError(f"{spec}: cannot read: {e.strerror or e}") from None
+    raw = _read_scene_file(path, source)
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as e:
@@ -603,7 +602,58 @@ def load_scene(spec: str | os.PathLike | None = None) -> Scene:
         raise SceneError(f"{source}: not valid TOML: {e}") from None
     scene = scene_from_dict(data, source=source, base_dir=path.parent.resolve(), default_name=path.stem)
     scene.path = path
+    scene.source = source
     return scene
+
+
+#: A scene file is a small TOML text (the largest shipped is a few KB); one
+#: larger than this is not a scene, and is refused before it is read.
+MAX_SCENE_BYTES = 16 * 1024 * 1024
+
+
+def _read_scene_file(path: Path, name: str) -> bytes:
+    """The bytes of a scene file, read only when it is a regular file of at
+    most MAX_SCENE_BYTES: a device (/dev/zero) would be read until memory
+    runs out, a named pipe would wait for a writer forever."""
+    try:
+        # O_NONBLOCK: opening a named pipe does not wait for a writer (no
+        # effect on a regular file)
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
+    except FileNotFoundError:
+        names = ", ".join(builtin_scene_names())
+        raise SceneError(f"{name}: no such scene file (built-in scenes: {names})") from None
+    except IsADirectoryError:
+        raise SceneError(f"{name}: is a directory, not a scene file") from None
+    except OSError as e:
+        raise SceneError(f"{name}: cannot read: {e.strerror or e}") from None
+    try:
+        st = os.fstat(fd)                 # of what was opened, not of what the name says now
+        if stat.S_ISDIR(st.st_mode):
+            raise SceneError(f"{name}: is a directory, not a scene file")
+        if not stat.S_ISREG(st.st_mode):
+            raise SceneError(f"{name}: is not a regular file (it is {_file_kind(st.st_mode)})")
+        if st.st_size > MAX_SCENE_BYTES:
+            raise SceneError(f"{name}: {st.st_size} bytes is too large for a scene file "
+                             f"(at most {MAX_SCENE_BYTES // (1024 * 1024)} MiB)")
+        with os.fdopen(fd, "rb") as f:
+            fd = None                     # (closed with f)
+            raw = f.read(MAX_SCENE_BYTES + 1)      # a file that grew since: still bounded
+    except OSError as e:
+        raise SceneError(f"{name}: cannot read: {e.strerror or e}") from None
+    finally:
+        if fd is not None:
+            os.close(fd)
+    if len(raw) > MAX_SCENE_BYTES:
+        raise SceneError(f"{name}: too large for a scene file (over {MAX_SCENE_BYTES // (1024 * 1024)} MiB)")
+    return raw
+
+
+def _file_kind(mode: int) -> str:
+    for test, kind in ((stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),
+                       (stat.S_ISFIFO, "a named pipe"), (stat.S_ISSOCK, "a socket")):
+        if test(mode):
+            return kind
+    return "a special file"
 
 
 def default_scene() -> Scene:
@@ -732,7 +782,7 @@ def with_overrides(scene: Scene, **kw) -> Scene:
     if kw.get("light_position") is not None:
         points = [lt for lt in s.lights if lt.type == "point"]
         if not points:
-            raise SceneError(f"{s.name}: --light-position: the scene has no point light to move")
+            raise SceneError(f"{s.source or s.name}: --light-position: the scene has no point light to move")
         points[0].position = tuple(kw["light_position"])
     validate_camera(s.camera, _Ctx("command line"))
     return s
