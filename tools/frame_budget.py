@@ -1,0 +1,95 @@
+"""Rays against time in one frame, per culling group, and what that implies
+for issue 5's 100 ms target (README, "Speed").
+
+For a scene (default: the default scene) at WxH (default 1280x720), 1
+sample: the whole frame's wall-clock and CPU time (median of 9 after a
+warm-up that compiles every variant); the rays it traces (camera, reflected,
+refracted and shadow rays, from the shader's own count: `--view cost`); and
+for each group of tiles of the culling plan its share of the pixels, its
+rays, the wall-clock time of one pass over it (median of 5) and so its
+nanoseconds per ray. Then the bound: the frame's fixed cost (a frame with
+no objects: clear, draw calls, read-back) plus every ray at the cheapest
+group's price. No change to how the rays are scheduled can beat that
+without tracing fewer rays, that is without changing the image.
+
+Usage (repository root, the project's virtual environment)::
+
+    python tools/frame_budget.py [SCENE] [WxH]
+"""
+import dataclasses
+import sys
+import time
+
+import moderngl
+import numpy as np
+
+from viewer import culling
+from viewer.renderer import Renderer
+from viewer.scene import load_scene
+
+
+def median_time(fn, n):
+    wall, cpu = [], []
+    for _ in range(n):
+        t, c = time.perf_counter(), time.process_time()
+        fn()
+        wall.append(time.perf_counter() - t)
+        cpu.append(time.process_time() - c)
+    return float(np.median(wall)), float(np.median(cpu))
+
+
+def main(name="default", size="1280x720"):
+    W, H = (int(v) for v in size.split("x"))
+    ctx = moderngl.create_standalone_context(backend="egl")
+    scene = load_scene(name)
+    r = Renderer(ctx, scene)
+    r.COMPILES_PER_DRAW = 99                       # every variant now, none in a timed render
+    r.render(W, H, 1)
+    wall, cpu = median_time(lambda: r.render(W, H, 1), 9)
+
+    empty = Renderer(ctx, dataclasses.replace(scene, objects=[]))
+    empty.render(W, H, 1)
+    fixed, _ = median_time(lambda: empty.render(W, H, 1), 9)
+    empty.release()
+
+    rays = r.ray_cost(W, H)
+    total = int(rays.sum())
+    print(f"{name} {W}x{H}, 1 sample: {wall * 1e3:.0f} ms wall, {cpu * 1e3:.0f} ms CPU (medians of 9); "
+          f"{total / 1e6:.2f} M rays ({total / (W * H):.2f} a pixel, at most {rays.max()}); "
+          f"a frame without objects {fixed * 1e3:.0f} ms")
+
+    groups = []
+    if r.culls():
+        fbo = r._target(W, H)
+        fbo.use()
+        ctx.disable(moderngl.BLEND)
+        names = [o.name or f"#{k}" for k, o in enumerate(scene.objects)]
+        for (subset, rects), (prog, _) in zip(culling.plan(scene, W, H).groups, r._culled(W, H)):
+            area = sum(w * h for _, _, w, h in rects)
+            # OpenGL's scissor rectangles count rows from the bottom; ray_cost's rows are top first.
+            n = sum(int(rays[H - y - h:H - y, x:x + w].sum()) for x, y, w, h in rects)
+
+            def draw():
+                r.bind(prog, W, H, (0.5, 0.5))
+                vao = r.vao_of(prog)
+                for rect in rects:
+                    ctx.scissor = rect
+                    vao.render(moderngl.TRIANGLES, vertices=3)
+                ctx.scissor = None
+                ctx.finish()
+            t, _ = median_time(draw, 5)
+            groups.append((t, n))
+            label = ", ".join(names[k] for k in subset) or "none"
+            print(f"  objects {label}: {area / (W * H):.1%} of the pixels, {n / 1e6:.2f} M rays "
+                  f"({n / max(area, 1):.1f} a pixel), {t * 1e3:.1f} ms, "
+                  f"{t / max(n, 1) * 1e9:.0f} ns a ray")
+    r.release()
+    if groups:
+        cheapest = min(t / n for t, n in groups if n)
+        bound = fixed + total * cheapest
+        print(f"every ray at the cheapest group's {cheapest * 1e9:.0f} ns plus the fixed cost: "
+              f"{bound * 1e3:.0f} ms (the frame takes {wall * 1e3:.0f} ms)")
+
+
+if __name__ == "__main__":
+    main(*sys.argv[1:])
