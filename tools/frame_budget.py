@@ -84,6 +84,8 @@ def main(name="default", size="1280x720"):
                   f"({n / max(area, 1):.1f} a pixel), {t * 1e3:.1f} ms, "
                   f"{t / max(n, 1) * 1e9:.0f} ns a ray")
     r.release()
+    # the groups' rectangles tile the image exactly once
+    assert not groups or sum(n for _, n in groups) == total, "groups do not cover the rays"
     if groups:
         cheapest = min(t / n for t, n in groups if n)
         bound = fixed + total * cheapest
