@@ -156,3 +156,17 @@ def test_objects_beyond_float32_do_not_crash_or_warn(render, gl):
     assert contains_point(scene.objects[1], np.array([0.0, 1.0, 5.0]))    # was OverflowError
     img = render_strict(render, scene)
     assert np.isfinite(img).all()
+
+
+@pytest.mark.parametrize("k", [-30, -5, 20, 30])
+def test_the_float64_reference_is_scale_free_too(k):
+    # an independent route for the same symmetry; it had an absolute offset
+    # floor (1e-5: 0.4% of pixels off) and an absolute probe step (1e20: the
+    # floor toward the horizon lost, 3.9%)
+    from viewer import stress
+    from viewer.reference import render_reference
+    from viewer.scene import scene_from_dict
+
+    unit = render_reference(scene_from_dict(stress._base()), 48, 27)
+    img = render_reference(scene_from_dict(stress.scaled(stress._base(), 10.0 ** k)), 48, 27)
+    assert float(np.abs(img - unit).max()) < 1e-9

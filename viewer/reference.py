@@ -537,8 +537,12 @@ class _Ctx:
         self.col_obj = np.array(col_obj, dtype=np.int64)
         self.col_opq = np.array([self.transp[k] == 0.0 for k in col_obj], dtype=bool)
         self.K = len(col_obj)
-        # scene size for the epsilon
-        size = max([1.0, float(np.linalg.norm(scene.camera.position)),
+        # scene size for the epsilon, and the step past a ray's last crossing
+        # at which its medium is probed: no absolute floor or step, so that
+        # the tracer is scale-free (tests/test_scale.py: 1e-30 to 1e30; a
+        # floor of 1.0 made a 1e-5 scene acne, a step of 1.0 vanished
+        # against t at 1e20).  position != target, so size > 0.
+        size = max([1e-300, float(np.linalg.norm(scene.camera.position)),
                     float(np.linalg.norm(scene.camera.target))]
                    + [p.extent() for p in self.prims])
         for lt in scene.lights:
@@ -595,7 +599,7 @@ class _Ctx:
         med_after = np.full(N, -1, dtype=np.int64)
         lo = eps.copy()
         tg = self._first_group(T, lo)
-        mid = np.where(np.isfinite(tg), 0.5 * (lo + tg), lo + 1.0)
+        mid = np.where(np.isfinite(tg), 0.5 * (lo + tg), lo + self.size)
         med = self.medium(O + mid[:, None] * D) if self.transparent else np.full(N, -1, dtype=np.int64)
         act = np.arange(N)
         while act.size:
@@ -623,7 +627,7 @@ class _Ctx:
             if not act.size:
                 break
             tn = np.where(Ta > hi[:, None], Ta, _INF).min(axis=1)
-            mid = np.where(np.isfinite(tn), 0.5 * (tg + tn), tg + 1.0)
+            mid = np.where(np.isfinite(tn), 0.5 * (tg + tn), tg + self.size)
             after = self.medium(O[act] + mid[:, None] * D[act])
             inter = after != med[act]
             if inter.any():
@@ -654,7 +658,7 @@ class _Ctx:
         lo = eps.copy()
         tg = self._first_group(T, lo)
         end = np.minimum(tg, tmax)
-        mid = np.where(np.isfinite(end), 0.5 * (lo + end), lo + 1.0)
+        mid = np.where(np.isfinite(end), 0.5 * (lo + end), lo + self.size)
         med = self.medium(P + mid[:, None] * L) if self.transparent else np.full(N, -1, dtype=np.int64)
         t_prev = np.zeros(N)
         act = np.arange(N)
@@ -677,7 +681,7 @@ class _Ctx:
             if not act.size:
                 break
             tn = np.where(Ta > hi[:, None], Ta, _INF).min(axis=1)
-            mid = np.where(np.isfinite(tn), 0.5 * (tg + tn), tg + 1.0)
+            mid = np.where(np.isfinite(tn), 0.5 * (tg + tn), tg + self.size)
             after = self.medium(P[act] + mid[:, None] * L[act])
             inter = after != med[act]
             if inter.any():
