@@ -190,8 +190,8 @@ class Viewer:
         self.good_scene = copy.deepcopy(scene)  # the last scene the renderer accepted
         self.renderer = Renderer(self.ctx, scene)
         # adaptive accumulation with `view --adaptive` or the panel's "adaptive"
-        # checkbox; off by default: measured on llvmpipe, uniform passes reach
-        # a given error sooner (README, "Adaptive anti-aliasing")
+        # checkbox; off by default: it reaches a given error sooner, but a
+        # still view then goes on tracing several times as long (README, "Viewer")
         self.prog = Progressive(self.ctx, self.renderer, DEFAULT_TARGET_MS,
                                 adaptive=bool(getattr(self.args, "adaptive", False)))
         self.controls = Controls(scene, glfw.get_window_size(win))

@@ -957,7 +957,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--quick", action="store_true",
                    help="a tiny sweep (eight settings per scene, one of them adaptive), for tests")
     p.add_argument("--out", default="bench-results", metavar="DIR",
-                   help="folder for results.csv, results.md, machine.json, pareto.png and the cached "
+                   help="folder for results.csv, results.md, machine.json, pareto.png, pareto-cpu.png and the cached "
                         "reference images (./bench-results)")
     p.add_argument("--time-tolerance", type=_fraction, default=DEFAULT_TIME_TOLERANCE, metavar="F",
                    help="relative time difference treated as a tie (measurement noise) when finding the "
@@ -975,7 +975,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "(peer.md, peer.csv, peer-time-to-error.csv, peer-machine.json, peer.png; see viewer/peer.py)")
     p.add_argument("--peer-time-limit", type=_positive(86400), default=None, metavar="S",
                    help="with --peer: a Mitsuba sample count whose first render took longer than S seconds "
-                        "ends its series (30; the next count is 2.25-4 times as many samples)")
+                        "ends its series (30; the next count is 1.78-4 times as many samples)")
 
 
 def _log(msg: str) -> None:

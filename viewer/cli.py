@@ -129,8 +129,9 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--size", type=_size, default=(1280, 720), metavar="WxH", help="window size (1280x720)")
     v.add_argument("--vsync", action=argparse.BooleanOptionalAction, default=True, help="sync to the display")
     v.add_argument("--adaptive", action=argparse.BooleanOptionalAction, default=False,
-                   help="once the view is still, add samples only where pixels still need them (off: on "
-                        "llvmpipe uniform passes reach a given error sooner; the panel switches it too)")
+                   help="once the view is still, add samples only where pixels still need them (off by "
+                        "default: it reaches a given error sooner but then keeps tracing a still view several "
+                        "times as long; the panel switches it too)")
     # hidden: `make run` checks that a window can be opened; the soak test drives N frames
     v.add_argument("--probe", action="store_true", help=argparse.SUPPRESS)
     v.add_argument("--soak", type=_int_range(1, 10**7), default=0, metavar="N", help=argparse.SUPPRESS)

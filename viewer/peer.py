@@ -656,7 +656,7 @@ QUICK_ADAPTIVE_BUDGETS = (4, 8)
 TARGET_ERRORS = (0.1, 0.07, 0.05, 0.04, 0.03, 0.025, 0.02, 0.015, 0.01, 0.007, 0.005, 0.004, 0.003,
                  0.002, 0.0015, 0.0012, 0.001)
 #: A Mitsuba point whose warm-up render took longer than this (seconds) ends
-#: its series: the next sample count (MITSUBA_SPP: 2.25-4 times as many)
+#: its series: the next sample count (MITSUBA_SPP: 1.78-4 times as many)
 #: would take that much longer.
 PEER_TIME_LIMIT_S = 30.0
 
