@@ -251,3 +251,36 @@ def test_builtin_scenes_render_finite(render, name):
     assert np.all(np.isfinite(img))
     assert img.min() >= 0.0
     assert img.std() > 0.01  # not a blank picture
+
+
+def test_a_renderer_builds_its_later_variants_from_the_shaders_it_started_with(gl, tmp_path, monkeypatch):
+    # The viewer compiles culling and debug variants long after it started; a
+    # shader file broken on disk meanwhile (an edit in progress) crashed it
+    # there (exit 1), although F5 had just kept the last good shaders.  Only a
+    # new renderer (F5) reads the disk again.
+    import shutil
+
+    from viewer.renderer import Renderer
+    from viewer.scene import load_scene
+    from viewer.shaders import ShaderError, shader_root
+
+    shaders = tmp_path / "shaders"
+    shutil.copytree(shader_root(), shaders)
+    monkeypatch.setenv("GLASSRAY_SHADERS", str(shaders))
+    r = Renderer(gl, load_scene("default"))
+    try:
+        good = r.render(64, 36, 1)
+        trace = shaders / "trace.frag"
+        trace.write_text(trace.read_text().replace("void main() {", "void main() { this_is_an_error;"))
+        (shaders / "lib" / "optics.glsl").unlink()
+        before = r.programs_built
+        r.variant(VIEW_MODE=1)                       # a debug view: a new program
+        assert r.programs_built == before + 1
+        r.COMPILES_PER_DRAW = 99                     # every culling variant at a new size
+        r.render(320, 180, 1)
+        assert r.programs_built > before + 1
+        assert np.array_equal(r.render(64, 36, 1), good)
+        with pytest.raises(ShaderError, match="this_is_an_error|optics.glsl"):
+            Renderer(gl, load_scene("default"))      # F5: the disk as it is now
+    finally:
+        r.release()

@@ -20,7 +20,7 @@ from . import interrupt
 from .imageio import read_sky_image
 from .sampling import sample_offsets
 from .scene import Scene
-from .shaders import build_program
+from .shaders import ShaderFiles, build_program
 
 # Pixels per draw call: big enough to keep the GPU busy, small enough that a
 # deep ray tree on a slow GPU stays far from a ~2 s watchdog.
@@ -75,6 +75,9 @@ class Renderer:
         #: shader programs this renderer has built (a benchmark checks that
         #: its timed renders build none)
         self.programs_built = 0
+        #: the shader sources as they were when this renderer was made: every
+        #: program it builds later comes from them (F5 makes a new renderer)
+        self.shader_files = ShaderFiles()
         self.scene: Scene | None = None
         self.program: moderngl.Program | None = None
         self.set_scene(scene)
@@ -111,7 +114,7 @@ class Renderer:
         key = self._program_key(defines, vertex)
         prog = self._programs.get(key)
         if prog is None:
-            prog = build_program(self.ctx, vertex=vertex, defines=defines)
+            prog = build_program(self.ctx, vertex=vertex, defines=defines, sources=self.shader_files)
             self.programs_built += 1
             self._programs[key] = prog
         return prog
@@ -270,7 +273,7 @@ class Renderer:
         everything is in use the cache holds more for a while."""
         prog = self._subset_programs.pop(key, None)
         if prog is None:
-            prog = build_program(self.ctx, defines=defines)
+            prog = build_program(self.ctx, defines=defines, sources=self.shader_files)
             self.programs_built += 1
             self._subset_of[key] = (frozenset(subset), extra_key)
         self._subset_programs[key] = prog          # most recent last

@@ -11,6 +11,7 @@ compiler's ``0:12(3): error`` can be mapped back to ``lib/x.glsl:12``.
 from __future__ import annotations
 
 import os
+import posixpath
 import re
 from dataclasses import dataclass, field
 from importlib import resources
@@ -42,15 +43,45 @@ def shader_root() -> Path:
     return Path(__file__).resolve().parent.parent / "shaders"
 
 
+class ShaderFiles:
+    """The shader folder's sources, read once, when made.  A renderer
+    compiles every later variant of its program (culling subsets, debug
+    views, adaptive passes) from the same text as the first, whatever the
+    files on disk say by then: an edit being typed must not reach a running
+    viewer half-way, only through F5, which makes a new renderer and so reads
+    them again."""
+
+    SUFFIXES = (".frag", ".vert", ".glsl")
+
+    def __init__(self, root: Path | None = None):
+        self.root = Path(root or shader_root())
+        self._texts: dict[str, str] = {}
+        self._errors: dict[str, str] = {}
+        for p in sorted(self.root.rglob("*")) if self.root.is_dir() else ():
+            if p.suffix in self.SUFFIXES and p.is_file():
+                rel = p.relative_to(self.root).as_posix()
+                try:
+                    self._texts[rel] = p.read_text(encoding="utf-8")
+                except (OSError, UnicodeDecodeError) as e:   # reported if a shader includes it
+                    self._errors[rel] = getattr(e, "strerror", None) or str(e)
+
+    def read(self, rel: str) -> str:
+        rel = posixpath.normpath(rel)
+        if rel in self._texts:
+            return self._texts[rel]
+        raise OSError(self._errors.get(rel, "No such file or directory"))
+
+
 @dataclass
 class Source:
     text: str
     files: list[str] = field(default_factory=list)  # index -> file name for #line
 
 
-def load_source(name: str, defines: dict[str, object] | None = None, root: Path | None = None) -> Source:
+def load_source(name: str, defines: dict[str, object] | None = None, root: Path | None = None,
+                sources: ShaderFiles | None = None) -> Source:
     """Read ``name`` with its includes resolved and ``defines`` injected right
-    after ``#version``."""
+    after ``#version``: from `sources` (a snapshot) when given, else from disk."""
     root = root or shader_root()
     files: list[str] = []
     out: list[str] = []
@@ -59,9 +90,8 @@ def load_source(name: str, defines: dict[str, object] | None = None, root: Path 
     def emit(rel: str, stack: tuple[str, ...]) -> None:
         if rel in stack:
             raise ShaderError(f"{rel}: #include cycle: {' -> '.join(stack + (rel,))}")
-        path = root / rel
         try:
-            text = path.read_text(encoding="utf-8")
+            text = sources.read(rel) if sources is not None else (root / rel).read_text(encoding="utf-8")
         except OSError as e:
             where = f" (included from {stack[-1]})" if stack else ""
             raise ShaderError(f"{rel}: cannot read shader{where}: {e.strerror or e}") from None
@@ -108,10 +138,11 @@ def explain_compile_error(message: str, files: list[str]) -> str:
 
 
 def build_program(ctx, fragment: str = "trace.frag", vertex: str = "fullscreen.vert",
-                  defines: dict[str, object] | None = None, root: Path | None = None):
+                  defines: dict[str, object] | None = None, root: Path | None = None,
+                  sources: ShaderFiles | None = None):
     """Compile and link; raise ShaderError with file:line locations."""
-    vs = load_source(vertex, None, root)
-    fs = load_source(fragment, defines, root)
+    vs = load_source(vertex, None, root, sources)
+    fs = load_source(fragment, defines, root, sources)
     try:
         return ctx.program(vertex_shader=vs.text, fragment_shader=fs.text)
     except Exception as e:  # moderngl raises moderngl.Error with the driver's log
