@@ -432,6 +432,9 @@ def test_v_shows_the_cost_view(xdisplay, tmp_path):
         Image.fromarray(window).save(tmp_path / "cost-window.png")
         below_hud = (slice(125, SIZE[1]), slice(0, SIZE[0]))  # the heat map's bottom and the legend
         assert mismatch(window[below_hud], expected[below_hud]) < 0.01
+        # ... with the HUD over it (it went into the renderer's target instead)
+        hud = (slice(0, 40), slice(0, SIZE[0] // 2))
+        assert mismatch(window[hud], expected[hud]) > 0.02
         # normals, depth, objects, then the image again
         v.key("v")
         normals = v.shot()

@@ -566,6 +566,10 @@ class Viewer:
                 self.prog.display(self.ctx.screen, (0, 0, fbw, fbh))
             else:
                 self.ctx.copy_framebuffer(self.ctx.screen, self.debug_fbo)
+                # copy_framebuffer leaves the last framebuffer used bound (the
+                # renderer's target, where the view was traced): the overlays
+                # below must go to the window
+                self.ctx.screen.use()
         if ui:
             if draw:
                 self._draw_overlays()
