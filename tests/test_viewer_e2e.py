@@ -480,6 +480,38 @@ def test_soak_keeps_memory_and_gl_objects_flat(xdisplay, tmp_path):
     assert list((tmp_path / "cache" / "glassray" / "quality").glob("*.json"))
 
 
+def test_fast_tabs_toggle_the_panel_and_keep_the_keys(xdisplay, tmp_path, gl):
+    """Tab pressed three times within a frame used to reach the panel that the
+    first one opened: ImGui put its "max depth" field in edit mode, which
+    then took every key (Tab no longer hid the panel, 3 was typed into it)."""
+    from viewer.scene import load_scene
+
+    scene_file = tmp_path / "e2e.toml"
+    scene_file.write_text(SCENE)
+    run_dir = tmp_path / "run"
+    run_dir.mkdir()
+    v = Viewer(xdisplay, run_dir, str(scene_file), "--size", f"{SIZE[0]}x{SIZE[1]}", "--no-vsync")
+    try:
+        before = v.shot("F12")
+        v.xdo("key", "--delay", "5", "Tab", "Tab", "Tab")      # odd: the panel is open
+        time.sleep(0.5)
+        with_panel = v.shot("F12")
+        right = (slice(125, 170), slice(200, 310))             # the panel, below the HUD's "saved ..." line
+        assert np.abs(with_panel[right].astype(int) - before[right].astype(int)).mean() > 20
+        v.key("Tab")                                           # hides it
+        time.sleep(0.5)
+        hidden = v.shot("F12")
+        assert np.abs(hidden[right].astype(int) - before[right].astype(int)).mean() < 5
+        v.key("2")                                             # the depth key still works
+        scene = load_scene(scene_file)
+        scene.render.max_depth = 2
+        assert_same_picture(v.shot(), offscreen(gl, scene))
+        assert v.quit() == 0
+        assert not any("Traceback" in e for e in v.stderr), "\n".join(v.stderr)
+    finally:
+        v.close()
+
+
 def test_no_display_server_fails_with_a_hint(tmp_path):
     env = dict(os.environ, DISPLAY=free_display())
     env.pop("WAYLAND_DISPLAY", None)

@@ -291,9 +291,18 @@ class Viewer:
         return self._imgui_ready and self.imgui.get_io().want_text_input
 
     def _on_key(self, win, key, scancode, action, mods):
+        self.ui_frames = max(self.ui_frames, 2)
+        if key == glfw.KEY_TAB:
+            # Tab is ours (show / hide the panel), never ImGui's: ImGui moves
+            # keyboard focus with it, and a Tab that reached a panel just
+            # opened (several pressed within a frame) put a text field in
+            # edit mode, which then took every key, Tab and 1..9 included
+            act = self.controls.key("tab") if action == glfw.PRESS else None
+            if act is not None:
+                self.actions.append(act)
+            return
         if self._imgui_ready:
             self.imgui.backends.glfw_key_callback(self._addr, key, scancode, action, mods)
-        self.ui_frames = max(self.ui_frames, 2)
         if action == glfw.RELEASE or self._ui_wants_keys():
             return
         name = _KEYS.get(key)
