@@ -18,24 +18,12 @@ Usage (repository root, the project's virtual environment)::
 """
 import dataclasses
 import sys
-import time
 
 import moderngl
-import numpy as np
 
-from viewer import culling
+from _frame_groups import median_time, timed_groups
 from viewer.renderer import Renderer
 from viewer.scene import load_scene
-
-
-def median_time(fn, n):
-    wall, cpu = [], []
-    for _ in range(n):
-        t, c = time.perf_counter(), time.process_time()
-        fn()
-        wall.append(time.perf_counter() - t)
-        cpu.append(time.process_time() - c)
-    return float(np.median(wall)), float(np.median(cpu))
 
 
 def main(name="default", size="1280x720"):
@@ -60,24 +48,11 @@ def main(name="default", size="1280x720"):
 
     groups = []
     if r.culls():
-        fbo = r._target(W, H)
-        fbo.use()
-        ctx.disable(moderngl.BLEND)
         names = [o.name or f"#{k}" for k, o in enumerate(scene.objects)]
-        for (subset, rects), (prog, _) in zip(culling.plan(scene, W, H).groups, r._culled(W, H)):
+        for subset, rects, t in timed_groups(r, W, H):
             area = sum(w * h for _, _, w, h in rects)
             # OpenGL's scissor rectangles count rows from the bottom; ray_cost's rows are top first.
             n = sum(int(rays[H - y - h:H - y, x:x + w].sum()) for x, y, w, h in rects)
-
-            def draw():
-                r.bind(prog, W, H, (0.5, 0.5))
-                vao = r.vao_of(prog)
-                for rect in rects:
-                    ctx.scissor = rect
-                    vao.render(moderngl.TRIANGLES, vertices=3)
-                ctx.scissor = None
-                ctx.finish()
-            t, _ = median_time(draw, 5)
             groups.append((t, n))
             label = ", ".join(names[k] for k in subset) or "none"
             print(f"  objects {label}: {area / (W * H):.1%} of the pixels, {n / 1e6:.2f} M rays "

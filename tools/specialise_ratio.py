@@ -13,27 +13,17 @@ Usage (repository root, the project's virtual environment)::
     python tools/specialise_ratio.py [SCENE ...]
 """
 import sys
-import time
 
 import moderngl
 import numpy as np
 
+from _frame_groups import median_time, timed_groups
 from viewer import culling
 from viewer.renderer import Renderer
 from viewer.scene import load_scene
 
 W, H = 1280, 720
 ctx = moderngl.create_standalone_context(backend="egl")
-
-
-def median_time(fn, n):
-    wall, cpu = [], []
-    for _ in range(n):
-        t, c = time.perf_counter(), time.process_time()
-        fn()
-        wall.append(time.perf_counter() - t)
-        cpu.append(time.process_time() - c)
-    return float(np.median(wall)), float(np.median(cpu))
 
 
 for name in sys.argv[1:] or ["bench-opaque", "glass-sphere", "default"]:
@@ -54,22 +44,9 @@ for name in sys.argv[1:] or ["bench-opaque", "glass-sphere", "default"]:
     if spec.culls():
         plan_s, _ = median_time(lambda: culling.plan(scene, W, H), 5)
         print(f"  culling plan: {plan_s * 1e3:.1f} ms to compute")
-        fbo = spec._target(W, H)
-        fbo.use()
-        ctx.disable(moderngl.BLEND)
         names = [o.name or f"#{k}" for k, o in enumerate(scene.objects)]
-        for (subset, rects), (prog, _) in zip(culling.plan(scene, W, H).groups, spec._culled(W, H)):
+        for subset, rects, wall in timed_groups(spec, W, H):
             area = sum(w * h for _, _, w, h in rects)
-
-            def draw():
-                spec.bind(prog, W, H, (0.5, 0.5))
-                vao = spec.vao_of(prog)
-                for rect in rects:
-                    ctx.scissor = rect
-                    vao.render(moderngl.TRIANGLES, vertices=3)
-                ctx.scissor = None
-                ctx.finish()
-            wall, _ = median_time(draw, 5)
             print(f"  {len(subset)} objects ({', '.join(names[k] for k in subset)}): "
                   f"{area / (W * H):.1%} of the pixels, {wall * 1e3:.1f} ms")
     spec.release()
