@@ -1316,3 +1316,21 @@ def test_messages_quote_keys_name_dates_and_show_close_numbers_exactly(tmp_path)
     with pytest.raises(SceneError, match=r"x: 1\.0000001 >= 1\.0\)"):
         load_text(tmp_path, '[materials.m]\n[[objects]]\ntype = "box"\nmin = [1.0000001, 0, 0]\n'
                             'max = [1.0, 1, 1]\nmaterial = "m"\n')
+
+
+def test_a_key_with_control_characters_keeps_the_message_on_one_line(tmp_path):
+    # a quoted key may hold a newline (TOML "\n"): the key path shows it
+    # escaped as TOML writes it, so the message stays one line
+    for text, path in (('"a\\nb" = 1\n', '"a\\nb"'),
+                       ('[materials."x\\ty\\u0007"]\nfoo = 1\n', 'materials."x\\ty\\u0007".foo')):
+        msg = assert_rejected(write(tmp_path, text), None)
+        assert "\n" not in msg and "\t" not in msg and "\x07" not in msg, repr(msg)
+        assert f": {path}: unknown key" in msg, msg
+
+
+def test_the_summary_of_a_scene_whose_name_has_a_newline_is_one_line(tmp_path):
+    s = load_text(tmp_path, 'name = "two\\nlines \\u001b[31mred"\n')
+    assert s.name == "two\nlines \x1b[31mred"                 # the name itself is kept as written
+    assert s.summary().startswith("two\\nlines \\x1b[31mred: 0 objects, ")
+    assert len(s.summary().splitlines()) == 1
+    assert load_text(tmp_path, 'name = "Café \\"au\\" lait"\n').summary().startswith('Café "au" lait: 0 objects')

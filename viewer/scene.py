@@ -175,7 +175,8 @@ class Scene:
         return feats
 
     def summary(self) -> str:
-        return (f"{self.name}: {_count(self.objects, 'object')}, {_count(self.materials, 'material')}, "
+        # (the name may hold a newline: the summary stays one line)
+        return (f"{printable(self.name)}: {_count(self.objects, 'object')}, {_count(self.materials, 'material')}, "
                 f"{_count(self.lights, 'light')}; features: {', '.join(self.features())}")
 
 
@@ -196,11 +197,34 @@ class _Ctx:
 _BARE_KEY = re.compile(r"[A-Za-z0-9_-]+")
 
 
+#: TOML's short escapes in a basic string; any other control character is \uXXXX
+_TOML_ESCAPES = {"\\": "\\\\", '"': '\\"', "\b": "\\b", "\t": "\\t", "\n": "\\n", "\f": "\\f", "\r": "\\r"}
+
+
+def _toml_quote(key: str) -> str:
+    """A key as TOML writes it in a basic string: quotes and backslashes
+    escaped, and control characters too, so that a message stays one line."""
+    return '"' + "".join(_TOML_ESCAPES.get(c) or (f"\\u{ord(c):04X}" if _is_control(c) else c)
+                         for c in key) + '"'
+
+
+def _is_control(c: str) -> bool:
+    return ord(c) < 0x20 or 0x7F <= ord(c) < 0xA0 or c in "\u2028\u2029"
+
+
+def printable(text: str) -> str:
+    """`text` with its control characters (a newline, an escape sequence)
+    written as escapes, so that it shows on one line as it is."""
+    if not any(_is_control(c) for c in text):
+        return text
+    return "".join(c.encode("unicode_escape").decode("ascii") if _is_control(c) else c for c in text)
+
+
 def _join(path: str, key: str | int) -> str:
     if isinstance(key, int):
         return f"{path}[{key}]"
     if not _BARE_KEY.fullmatch(key):
-        key = '"' + key.replace("\\", "\\\\").replace('"', '\\"') + '"'   # as TOML quotes it: materials."a.b"
+        key = _toml_quote(key)       # as TOML quotes it: materials."a.b"
     return f"{path}.{key}" if path else key
 
 
