@@ -334,3 +334,25 @@ def test_ctrl_c_ends_a_long_render_cleanly(tmp_path, delay):
     assert p.returncode == 130
     assert "interrupted" in err and "Traceback" not in err
     assert not out.exists()
+
+
+def test_check_stays_one_line_for_a_name_with_a_newline(tmp_path):
+    (tmp_path / "s.toml").write_text('name = "two\\nlines"\n')
+    r = glassray("check", tmp_path / "s.toml")
+    assert r.returncode == 0, r.stderr
+    assert r.stdout == "two\\nlines: 0 objects, 0 materials, 0 lights; features: sky:gradient\n"
+
+
+def test_an_abbreviated_vector_option_takes_a_leading_minus_like_the_full_name():
+    from viewer.cli import build_parser, normalise_argv
+
+    parser = build_parser()
+    full = parser.parse_args(normalise_argv(["render", "-o", "x.png", "--camera-position", "-1,2,3"]))
+    short = parser.parse_args(normalise_argv(["render", "-o", "x.png", "--camera-pos", "-1,2,3"]))
+    assert short.camera_position == full.camera_position == (-1.0, 2.0, 3.0)
+    # argparse still resolves the abbreviation, so an ambiguous one is still bad usage (exit 2)
+    with pytest.raises(SystemExit) as e:
+        parser.parse_args(normalise_argv(["render", "-o", "x.png", "--camera", "-1,2,3"]))
+    assert e.value.code == 2
+    # a value that is an option is not swallowed
+    assert normalise_argv(["render", "--camera-pos", "--debug"])[-2:] == ["--camera-pos", "--debug"]

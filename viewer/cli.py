@@ -204,12 +204,15 @@ def _optional_module(name: str):
 
 def normalise_argv(argv: list[str]) -> list[str]:
     """Default subcommand and vector (and size) values with a leading minus:
-    ``--camera-position -1,2,3`` becomes ``--camera-position=-1,2,3``."""
+    ``--camera-position -1,2,3`` becomes ``--camera-position=-1,2,3``.  An
+    abbreviation argparse would take (``--camera-pos -1,2,3``) is joined the
+    same way and left for argparse to resolve, or to call ambiguous."""
     out: list[str] = []
     i = 0
     while i < len(argv):
         a = argv[i]
-        if a in DASH_VALUE_OPTIONS and i + 1 < len(argv) and argv[i + 1].startswith("-") and argv[i + 1][1:2] not in ("-", ""):
+        takes_dash = a.startswith("--") and len(a) > 2 and any(o.startswith(a) for o in DASH_VALUE_OPTIONS)
+        if takes_dash and i + 1 < len(argv) and argv[i + 1].startswith("-") and argv[i + 1][1:2] not in ("-", ""):
             out.append(f"{a}={argv[i + 1]}")
             i += 2
             continue
