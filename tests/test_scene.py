@@ -1334,3 +1334,19 @@ def test_the_summary_of_a_scene_whose_name_has_a_newline_is_one_line(tmp_path):
     assert s.summary().startswith("two\\nlines \\x1b[31mred: 0 objects, ")
     assert len(s.summary().splitlines()) == 1
     assert load_text(tmp_path, 'name = "Café \\"au\\" lait"\n').summary().startswith('Café "au" lait: 0 objects')
+
+
+def test_saving_through_a_symbolic_link_replaces_the_file_it_points_to(tmp_path):
+    # a scene kept elsewhere and linked in (dotfiles, a shared folder): the
+    # link stays a link, the file it points to gets the new scene
+    real_dir = tmp_path / "real"
+    real_dir.mkdir()
+    real = real_dir / "scene.toml"
+    real.write_bytes(OLD)
+    link = tmp_path / "linked.toml"
+    link.symlink_to(real)
+    s = load_scene("glass-sphere")
+    save_scene(s, link)
+    assert link.is_symlink() and os.readlink(link) == str(real)
+    assert load_scene(real).name == s.name
+    assert sorted(os.listdir(real_dir)) == ["scene.toml"] and sorted(os.listdir(tmp_path)) == ["linked.toml", "real"]

@@ -757,8 +757,12 @@ def scene_to_toml(scene: Scene) -> str:
 
 def write_atomic(path: Path, data: bytes) -> None:
     """Write to a temporary file beside ``path`` and rename it into place, so a
-    failed write never leaves a half-written or destroyed file."""
+    failed write never leaves a half-written or destroyed file.  A symbolic
+    link is followed: the file it points to is replaced and the link kept,
+    as a plain open() for writing would."""
     path = Path(path)
+    if path.is_symlink():
+        path = Path(os.path.realpath(path))
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent or ".")
     try:
         # mkstemp makes the file 0600; give it the mode a plain open() would
