@@ -132,3 +132,42 @@ def test_save_failure_is_reported_not_raised(tmp_path):
     panel.save_path = str(tmp_path / "missing" / "s.toml")
     assert not panel.save(load_scene("default"))
     assert "could not save" in panel.status
+
+
+def test_the_panel_stays_in_a_window_made_smaller(ui):
+    """The panel was placed once (at the right edge of the window it was
+    first shown in) and then left there: after the window was made smaller
+    it lay outside it, and one squeezed through a tiny window ended up above
+    and left of it, title bar and all (it could not be dragged back)."""
+    from viewer.ui import Panel
+
+    scene = load_scene("default")
+    panel = Panel(scene)
+    for size in ((1280, 720), (400, 300), (1, 1), (640, 400)):
+        ui.display_size = imgui.ImVec2(*size)
+        for _ in range(3):
+            imgui.new_frame()
+            panel.draw(scene, size)
+            imgui.render()
+        if size == (1, 1):
+            continue
+        x0, y0, x1, y1 = panel.rect
+        w, h = size
+        assert 0 <= x0 < x1 <= w and 0 <= y0 < y1 <= h, (size, panel.rect)
+        assert x1 > w - 20  # still at the right edge
+
+
+def test_the_hud_shows_no_glyph_the_font_lacks(ui, monkeypatch):
+    """The HUD line of "max error" ("measuring…") showed a "?" for the
+    ellipsis, which the default font does not have (the panel and the help
+    already wrote it as "...")."""
+    from viewer import ui as ui_module
+
+    shown = []
+    monkeypatch.setattr(ui_module.imgui, "text", lambda s: shown.append(s))
+    monkeypatch.setattr(ui_module.imgui, "text_colored", lambda col, s: shown.append(s))
+    imgui.new_frame()
+    ui_module.draw_hud(["12.0 ms  80 fps", "max error 0.02: measuring\u2026 37%"], "max error: measuring\u2026")
+    imgui.render()
+    assert len(shown) == 3 and "measuring... 37%" in shown[1]
+    assert not any("\u2026" in s or not s.isascii() for s in shown), shown

@@ -68,6 +68,8 @@ class Panel:
         self.max_error = 0.02
         self.quality_status = ""  # "measuring ...", the pick, set by the app
         self.adaptive = True  # adaptive accumulation (the app keeps it in step with Progressive)
+        self._drawn_size: tuple[float, float] | None = None  # the window size it was last drawn for
+        self.rect = (0.0, 0.0, 0.0, 0.0)  # the panel's window: x0, y0, x1, y1
 
     def _open(self) -> None:
         if self.open_all:
@@ -94,10 +96,20 @@ class Panel:
         res = PanelResult()
         w, h = size
         pw = min(440.0, max(200.0, w * 0.45))
-        imgui.set_next_window_pos(imgui.ImVec2(w - 8.0, 8.0), imgui.Cond_.first_use_ever, imgui.ImVec2(1.0, 0.0))
-        imgui.set_next_window_size(imgui.ImVec2(pw, max(100.0, h - 16.0)), imgui.Cond_.first_use_ever)
+        # placed at the right edge when first shown and again whenever the
+        # window's size changed since the panel was last drawn: left where it
+        # was, a panel of a larger window ended up outside a smaller one (and
+        # one squeezed through a tiny window, title bar and all, above and
+        # left of it, where it could not even be dragged back)
+        size_changed = (float(w), float(h)) != self._drawn_size
+        self._drawn_size = (float(w), float(h))
+        cond = imgui.Cond_.always if size_changed else imgui.Cond_.first_use_ever
+        imgui.set_next_window_pos(imgui.ImVec2(w - 8.0, 8.0), cond, imgui.ImVec2(1.0, 0.0))
+        imgui.set_next_window_size(imgui.ImVec2(pw, max(100.0, h - 16.0)), cond)
         visible, _ = imgui.begin("Settings", None, imgui.WindowFlags_.no_saved_settings)
         try:
+            pos, wsize = imgui.get_window_pos(), imgui.get_window_size()
+            self.rect = (pos.x, pos.y, pos.x + wsize.x, pos.y + wsize.y)  # where the panel is (tests)
             if visible:
                 # widgets take the width the labels leave
                 imgui.push_item_width(-imgui.calc_text_size("preview target (ms)").x - 8.0)
@@ -354,9 +366,9 @@ def draw_hud(lines: list[str], message: str = "") -> None:
     imgui.set_next_window_bg_alpha(0.55)
     imgui.begin("##hud", None, flags)
     for line in lines:
-        imgui.text(line)
+        imgui.text(_plain(line))  # "max error ...: measuring…" showed "measuring?"
     if message:
-        imgui.text_colored(imgui.ImVec4(1.0, 0.8, 0.3, 1.0), message)
+        imgui.text_colored(imgui.ImVec4(1.0, 0.8, 0.3, 1.0), _plain(message))
     imgui.end()
 
 
