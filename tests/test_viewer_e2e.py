@@ -506,6 +506,16 @@ def test_fast_tabs_toggle_the_panel_and_keep_the_keys(xdisplay, tmp_path, gl):
         scene = load_scene(scene_file)
         scene.render.max_depth = 2
         assert_same_picture(v.shot(), offscreen(gl, scene))
+        # P (and F12) pressed three times within a frame or two: three files
+        # each (the presses of one frame made one file)
+        for key in ("p", "F12"):
+            v.xdo("key", "--delay", "5", key, key, key)
+            saved = []
+            while len(saved) < 3:
+                line = v.next_line(timeout=20)
+                if line.endswith(".png"):
+                    saved.append(Path(line))
+            assert len(set(saved)) == 3 and all(p.is_file() for p in saved), saved
         assert v.quit() == 0
         assert not any("Traceback" in e for e in v.stderr), "\n".join(v.stderr)
     finally:

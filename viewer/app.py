@@ -216,6 +216,7 @@ class Viewer:
         self._preview_frames: list[float] = []
         self._cursor: tuple[float, float] | None = None
         self._want_window_shot = 0  # frames to draw before F12 reads the window back
+        self._window_shots = 0  # F12 presses waiting for it (one file each)
         self.frames = 0
         self.panel = None
         # debug views (V): the picture at debug_res, shown from debug_fbo
@@ -475,7 +476,7 @@ class Viewer:
             self.last_change = t0
 
         actions, self.actions = self.actions, []
-        want_shot = False
+        want_shot = 0  # P presses in this frame: one file each (three quick presses made two)
         for act in actions:
             if act == "quit":
                 glfw.set_window_should_close(win, True)
@@ -491,13 +492,14 @@ class Viewer:
             elif act == "reload":
                 self.reload()
             elif act == "screenshot":
-                want_shot = True
+                want_shot += 1
             elif act == "view":
                 self._view_changed()
             elif act == "screenshot_window":
                 # ImGui shows a window that just opened one frame later: let the
                 # overlays settle for a frame, then read the window back
                 self._want_window_shot = 2
+                self._window_shots += 1
         if self.controls.message:
             self._say(self.controls.message)
             self.controls.message = ""
@@ -566,7 +568,7 @@ class Viewer:
             show_trace = False
         trace_ms = self.prog.last_trace_ms if traced else 0.0
 
-        if want_shot:
+        for _ in range(want_shot):
             self.screenshot()
 
         draw = show_trace or self.needs_display or self.ui_frames > 0 or self._want_window_shot
@@ -591,7 +593,9 @@ class Viewer:
         if self._want_window_shot and draw:
             self._want_window_shot -= 1
             if self._want_window_shot == 0:
-                self._window_screenshot(fbw, fbh)
+                shots, self._window_shots = max(1, self._window_shots), 0
+                for _ in range(shots):
+                    self._window_screenshot(fbw, fbh)
         if draw:
             glfw.swap_buffers(win)
             self.frames += 1
