@@ -832,7 +832,9 @@ class Viewer:
         try:
             renderer = Renderer(self.ctx, merged)  # compiles trace.frag from disk
         except Exception as e:
-            self._error(f"reload failed, keeping the last good shaders: {e}")
+            # the shaders or the new scene's shader (a driver may reject it):
+            # both stay as they were
+            self._error(f"reload failed, keeping the last good scene and shaders: {e}")
             return
         try:
             self.prog.reload_program()
