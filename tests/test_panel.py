@@ -171,3 +171,19 @@ def test_the_hud_shows_no_glyph_the_font_lacks(ui, monkeypatch):
     imgui.render()
     assert len(shown) == 3 and "measuring... 37%" in shown[1]
     assert not any("\u2026" in s or not s.isascii() for s in shown), shown
+
+
+def test_the_help_stays_in_a_window_resized_while_it_is_open(ui):
+    """The help was centred only when it opened: a window made smaller
+    while it was open left it partly outside."""
+    from viewer import ui as ui_module
+
+    for size in ((1280, 720), (640, 400), (400, 300)):
+        ui.display_size = imgui.ImVec2(*size)
+        for _ in range(3):
+            imgui.new_frame()
+            ui_module.draw_help(size)
+            imgui.render()
+        x0, y0, x1, y1 = ui_module.help_rect
+        w, h = size
+        assert 0 <= x0 < x1 <= w and 0 <= y0 < y1 <= h, (size, ui_module.help_rect)

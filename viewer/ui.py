@@ -376,15 +376,27 @@ def _plain(text: str) -> str:
     return text.replace("`", "").replace("\u2026", "...")  # the default font has no ellipsis
 
 
+_help_drawn_size: tuple[int, int] | None = None  # the window size the help was last drawn for
+help_rect = (0.0, 0.0, 0.0, 0.0)  # where the help window is: x0, y0, x1, y1 (tests)
+
+
 def draw_help(size: tuple[int, int]) -> bool:
     """The help overlay; returns False when its close button was pressed."""
+    global _help_drawn_size
     w, h = size
-    imgui.set_next_window_pos(imgui.ImVec2(w * 0.5, h * 0.5), imgui.Cond_.appearing, imgui.ImVec2(0.5, 0.5))
+    # centred when it opens, and again when the window's size changed (as
+    # the panel: left where it was, it could end up outside a smaller window)
+    cond = imgui.Cond_.always if (w, h) != _help_drawn_size else imgui.Cond_.appearing
+    _help_drawn_size = (w, h)
+    imgui.set_next_window_pos(imgui.ImVec2(w * 0.5, h * 0.5), cond, imgui.ImVec2(0.5, 0.5))
     imgui.set_next_window_size_constraints(imgui.ImVec2(100.0, 60.0), imgui.ImVec2(max(200.0, w - 20.0),
                                                                                    max(100.0, h - 20.0)))
     flags = imgui.WindowFlags_.no_saved_settings | imgui.WindowFlags_.no_collapse | \
         imgui.WindowFlags_.always_auto_resize
     visible, keep_open = imgui.begin("Controls (H / F1 to close)", True, flags)
+    global help_rect
+    pos, wsize = imgui.get_window_pos(), imgui.get_window_size()
+    help_rect = (pos.x, pos.y, pos.x + wsize.x, pos.y + wsize.y)
     if visible:
         key_w = max(imgui.calc_text_size(k).x for k, _ in HELP)
         wrap = min(520.0, w - key_w - 60.0)
@@ -401,10 +413,14 @@ def draw_help(size: tuple[int, int]) -> bool:
                     imgui.text_wrapped(_plain(what))
                 imgui.end_table()
         else:  # a narrow window: each input above its effect
-            imgui.push_text_wrap_pos(max(100.0, w - 40.0))
+            # the wrap position is window-local: the window is at most
+            # w - 20 wide, less its padding and the scrollbar at the right
+            imgui.push_text_wrap_pos(max(100.0, w - 56.0))
             for key, what in HELP:
                 imgui.text_colored(imgui.ImVec4(1.0, 0.85, 0.4, 1.0), key)
-                imgui.text_wrapped("  " + _plain(what))
+                imgui.indent(12.0)                  # every wrapped line of the effect, not just its first
+                imgui.text_wrapped(_plain(what))
+                imgui.unindent(12.0)
             imgui.pop_text_wrap_pos()
     imgui.end()
     return bool(keep_open) if keep_open is not None else True
