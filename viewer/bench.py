@@ -913,18 +913,6 @@ def plot(path: Path, by_scene: dict[str, list[Result]], titles: dict[str, str], 
 # ---------------------------------------------------------------- command line
 
 
-def _positive(hi: int, lo: int = 1):
-    def parse(text: str) -> int:
-        try:
-            v = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
-        if not lo <= v <= hi:
-            raise argparse.ArgumentTypeError(f"expected an integer in {lo}..{hi}, got {v}")
-        return v
-    return parse
-
-
 def _fraction(text: str) -> float:
     try:
         v = float(text)
@@ -940,16 +928,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="benchmark only this scene (file or built-in name); default: "
                         + ", ".join(DEFAULT_SCENES))
     p.add_argument("--scenes", metavar="A,B,C", help="comma-separated scenes to benchmark (instead of SCENE)")
-    from .cli import size_type
+    from .cli import int_range, size_type
 
     p.add_argument("--size", type=size_type(), default=DEFAULT_SIZE, metavar="WxH",
                    help="full image size; error is measured at this size (%dx%d)" % DEFAULT_SIZE)
-    p.add_argument("--repeat", type=_positive(1000), default=DEFAULT_REPEAT, metavar="N",
+    p.add_argument("--repeat", type=int_range(1, 1000), default=DEFAULT_REPEAT, metavar="N",
                    help=f"timed renders per setting after the warm-up; the median is reported ({DEFAULT_REPEAT})")
-    p.add_argument("--reference-samples", type=_positive(65536), default=None, metavar="N",
+    p.add_argument("--reference-samples", type=int_range(1, 65536), default=None, metavar="N",
                    help=f"samples per pixel of the reference ({DEFAULT_REFERENCE_SAMPLES}; "
                         f"{QUICK_REFERENCE_SAMPLES} with --quick)")
-    p.add_argument("--reference-refine", type=_positive(1 << 20, lo=0), default=None, metavar="N",
+    p.add_argument("--reference-refine", type=int_range(0, 1 << 20), default=None, metavar="N",
                    help="samples per pixel of the reference where its samples disagree by more than "
                         f"{REFINE_TOLERANCE:g} (edges, a checker finer than the pixel); 0, or at most "
                         "--reference-samples: none (default: none for the sweep, "
@@ -973,7 +961,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "(Mitsuba 3: pip install 'glassray[peer]') on one scene that both draw identically "
                         "(default whitted-exact): error against time, time to reach an error "
                         "(peer.md, peer.csv, peer-time-to-error.csv, peer-machine.json, peer.png; see viewer/peer.py)")
-    p.add_argument("--peer-time-limit", type=_positive(86400), default=None, metavar="S",
+    p.add_argument("--peer-time-limit", type=int_range(1, 86400), default=None, metavar="S",
                    help="with --peer: a Mitsuba sample count whose first render took longer than S seconds "
                         "ends its series (30; the next count is 1.78-4 times as many samples)")
 

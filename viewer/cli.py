@@ -63,7 +63,8 @@ def size_type(lo: int = 1, hi: int = 16384):
 _size = size_type()
 
 
-def _int_range(lo: int, hi: int):
+def int_range(lo: int, hi: int):
+    """An argparse type: an integer in lo..hi (bench's options use it too)."""
     def parse(text: str) -> int:
         try:
             v = int(text)
@@ -103,8 +104,8 @@ def _add_common(p: argparse.ArgumentParser) -> None:
 
 def _add_overrides(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("scene overrides (each replaces the scene file's value)")
-    g.add_argument("--samples", type=_int_range(1, 65536), metavar="N", help="samples per pixel")
-    g.add_argument("--max-depth", type=_int_range(1, 64), metavar="N", help="longest chain of interactions")
+    g.add_argument("--samples", type=int_range(1, 65536), metavar="N", help="samples per pixel")
+    g.add_argument("--max-depth", type=int_range(1, 64), metavar="N", help="longest chain of interactions")
     g.add_argument("--min-weight", type=_float_range(0.0, 1.0), metavar="X", help="branch weight cut-off")
     g.add_argument("--camera-position", type=_vec3, metavar="x,y,z")
     g.add_argument("--camera-target", type=_vec3, metavar="x,y,z")
@@ -134,7 +135,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "times as long; the panel switches it too)")
     # hidden: `make run` checks that a window can be opened; the soak test drives N frames
     v.add_argument("--probe", action="store_true", help=argparse.SUPPRESS)
-    v.add_argument("--soak", type=_int_range(1, 10**7), default=0, metavar="N", help=argparse.SUPPRESS)
+    v.add_argument("--soak", type=int_range(1, 10**7), default=0, metavar="N", help=argparse.SUPPRESS)
     _add_overrides(v)
     _add_common(v)
 
@@ -145,13 +146,13 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("scene", nargs="?", metavar="SCENE", help="scene file or built-in scene name")
     r.add_argument("-o", "--output", required=True, metavar="OUT", help="output file (.png, .npy or .pfm)")
     r.add_argument("--size", type=_size, default=(1280, 720), metavar="WxH", help="image size (1280x720)")
-    r.add_argument("--seed", type=_int_range(0, 2**63 - 1), default=0, metavar="N",
+    r.add_argument("--seed", type=int_range(0, 2**63 - 1), default=0, metavar="N",
                    help="sample pattern seed (0); the same seed gives the same image")
     r.add_argument("--backend", choices=("auto", "egl", "osmesa"), default="auto",
                    help="OpenGL context: EGL, OSMesa, or EGL falling back to OSMesa (auto)")
     r.add_argument("--timing", action="store_true",
                    help="after a warm-up, render --repeat more times and print the median ms per frame")
-    r.add_argument("--repeat", type=_int_range(1, 1000), default=5, metavar="N", help="timed renders (5)")
+    r.add_argument("--repeat", type=int_range(1, 1000), default=5, metavar="N", help="timed renders (5)")
     r.add_argument("--view", choices=("color", "normals", "depth", "objects", "cost", "samples"), default="color",
                    help="what to draw: the image (color), or the first hit's normals, distance or object, "
                         "or rays traced per pixel (cost), or samples per pixel of the adaptive render "
