@@ -101,3 +101,15 @@ def test_schlick_is_not_what_the_shader_does(gl):
     out = _run(gl, [(math.cos(math.radians(a)), n1, n2)])
     assert abs(schlick - r) > 0.1
     assert out[0, 0] == pytest.approx(r, abs=2e-3)
+
+
+def test_equal_iors_give_no_reflection_at_any_angle(gl):
+    # The spec: two media of equal ior meet with R = 0, the ray going
+    # straight on.  cos i down to 1e-6 (float32's 1 - cos^2 rounds to 1
+    # below 2.4e-4: that was taken for total internal reflection).
+    cosines = [1.0, 0.5, 1e-2, 1e-3, 3e-4, 1e-4, 1e-5, 1e-6]
+    cases = [(c, n, n) for c in cosines for n in (1.0, 1.33, 1.5)]
+    out = _run(gl, cases)
+    for k, (c, _, _) in enumerate(cases):
+        assert out[k, 0] == 0.0 and out[k, 2] == 0.0, f"R for {cases[k]}"
+        assert out[k, 1] == pytest.approx(math.degrees(math.acos(c)), abs=2e-3), f"angle for {cases[k]}"

@@ -2,6 +2,10 @@
 // cosI = -dot(d, n) > 0 with n facing the incoming ray; eta = n1 / n2.
 
 float fresnelDielectric(float cosI, float n1, float n2, out float cosT) {
+    // Equal iors: R = 0 and the ray goes straight on (the spec's rule).  The
+    // formula below would agree but for float32: at grazing incidence
+    // 1 - cosI^2 rounds to 1 (cosI < 2.4e-4) and gave total reflection.
+    if (n1 == n2) { cosT = cosI; return 0.0; }
     float eta = n1 / n2;
     float sin2T = eta * eta * max(0.0, 1.0 - cosI * cosI);
     if (sin2T >= 1.0) { cosT = 0.0; return 1.0; }            // total internal reflection
