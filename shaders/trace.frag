@@ -94,6 +94,17 @@ int rayCount = 0;           // the cost view: rays traced for this pixel sample
 #define FOR_EACH_MEDIUM(X) SCENE_MEDIA(X)
 #endif
 
+// MAX_PASSES bounds the passes of nextInteraction and shadowTransmittance:
+// each pass crosses one group of transparent surfaces, and a line crosses
+// at most 1 (plane), 2 (sphere, box, cylinder) or 4 (vessel) surfaces of an
+// object, so the specialised shader gets that sum over the transparent
+// objects plus 2 (gpu_scene.max_passes); the generic one the bound for
+// NUM_OBJECTS vessels.  (2 * NUM_OBJECTS + 2 gave out inside a medium that
+// holds two vessels of its own: the ray was taken for escaped.)
+#ifndef MAX_PASSES
+#define MAX_PASSES (4 * NUM_OBJECTS + 2)
+#endif
+
 // What one sweep over all objects found along o + t d, tmin < t < tmax.
 struct Hits {
     float tNear;     // the nearest surface of any object (INF: none)
@@ -261,7 +272,7 @@ bool nextInteraction(vec3 o, vec3 d, inout uint mask, inout vec3 atten, out Inte
     float tmin = surfaceEps(o);
     Hits h = sweep(o, d, tmin, INF);
     float tOpaque0 = h.tOpaque, travelled = 0.0;
-    for (int pass = 0; pass < 2 * NUM_OBJECTS + 2; ++pass) {
+    for (int pass = 0; pass < MAX_PASSES; ++pass) {
         vec3 a = absorptionOf(mediumOf(mask));
         if (h.tNear >= INF) {
             atten *= exp(-a * INF);     // escaping through an absorbing medium: nothing left
@@ -315,7 +326,7 @@ vec3 shadowTransmittance(vec3 p, vec3 l, float dist, uint mask) {
     // blocks it; later passes sweep the media only
     Hits h = sweepShadow(o, l, surfaceEps(o), left);
     if (h.tOpaque < left) return vec3(0.0);
-    for (int pass = 0; pass < 2 * NUM_OBJECTS + 2; ++pass) {
+    for (int pass = 0; pass < MAX_PASSES; ++pass) {
         vec3 a = absorptionOf(mediumOf(mask));
         if (h.tNear >= left) return v * exp(-a * min(left, INF));
         vec3 q = o + h.tNear * l;
@@ -339,6 +350,12 @@ struct Surface { vec3 color; vec3 emission; };
 
 // The checker rule: parity of floor(x/s) + floor(z/s) in world x, z.  The
 // eye's world position modulo 2s is added back (the pattern repeats every 2s).
+// The point is first moved toward +x and +z by 2e-6 of its magnitude: far
+// more than its rounding, far less than a pixel, and the same in every
+// scene (so media that vanish leave the checker behind them as it was).  A
+// face that lies on a checker line (a box face at x = 0) then has the
+// spec's floor(0 / s) = 0 all over, where the rounding of its points to
+// either side of the line made salt and pepper of it.
 Surface surfaceAt(Material m, vec3 p) {
     Surface s;
     s.color = m.colorAmbient.rgb;
@@ -346,6 +363,7 @@ Surface surfaceAt(Material m, vec3 p) {
     if (m.dielectric.z > 0.5) {
         float size = m.dielectric.w;
         vec2 w = p.xz + m.checkerOffset.xy;
+        w += params.y * max(max(abs(p.x), max(abs(p.y), abs(p.z))), max(abs(w.x), abs(w.y)));
         if (mod(floor(w.x / size) + floor(w.y / size), 2.0) > 0.5) {
             s.color = m.checkerColor.rgb;
             s.emission = m.checkerEmission.rgb;

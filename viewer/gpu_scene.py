@@ -272,6 +272,18 @@ def object_list_macros(scene: Scene, subset: tuple[int, ...] | None = None) -> d
     return {"SCENE_OBJECTS(X)": " ".join(objects), "SCENE_MEDIA(X)": " ".join(media)}
 
 
+def max_passes(scene: Scene) -> int:
+    """MAX_PASSES of trace.frag: the most groups of transparent surfaces a
+    ray or shadow ray can cross before its interaction (a line crosses at
+    most 1 surface of a plane, 2 of a sphere, box or cylinder, 4 of a
+    vessel), plus the pass that finds the interaction or the sky, plus one;
+    never fewer than the 2 * objects + 2 the shader had before."""
+    per = {"plane": 1, "sphere": 2, "box": 2, "cylinder": 2}
+    crossings = sum(4 if o.type == "cylinder" and o.wall else per[o.type]
+                    for o in scene.objects if scene.is_transparent(o))
+    return max(crossings, 2 * len(scene.objects)) + 2
+
+
 def shader_defines(scene: Scene, specialise: bool = True, fresnel: str = "exact",
                    subset: tuple[int, ...] | None = None) -> dict[str, object]:
     """Compile-time constants of the shader for this scene: counts, the
@@ -294,6 +306,7 @@ def shader_defines(scene: Scene, specialise: bool = True, fresnel: str = "exact"
         "NUM_LIGHTS": len(scene.lights), "LIGHTS_LEN": max(1, len(scene.lights)),
         "NUM_TRANSPARENT": n_tr, "MEDIA_LEN": max(1, n_tr),
         "STACK_SIZE": scene.render.max_depth + 1,
+        "MAX_PASSES": max_passes(scene),
         **object_list_macros(scene, subset),
         **extra,
     }

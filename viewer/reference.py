@@ -704,7 +704,12 @@ class _Ctx:
         ck = self.has_ck[S]
         if ck.any():
             s = self.ck_size[S[ck]]
-            par = np.mod(np.floor(P[ck, 0] / s) + np.floor(P[ck, 2] / s), 2.0) == 1.0
+            # moved a little toward +x and +z (far more than the rounding of
+            # P, far less than any feature): on a surface that lies on a
+            # checker line (a box face at x = 0) floor(x / s) is then that of
+            # the exact x all over, not of its rounding to either side
+            e = 1e-9 * (self.size + np.linalg.norm(P[ck], axis=1))
+            par = np.mod(np.floor((P[ck, 0] + e) / s) + np.floor((P[ck, 2] + e) / s), 2.0) == 1.0
             idx = np.nonzero(ck)[0][par]
             C[idx] = self.ck_color[S[idx]]
             E[idx] = self.ck_emis[S[idx]]
