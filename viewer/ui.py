@@ -153,6 +153,9 @@ class Panel:
                 self.max_error_on, res.quality_changed = bool(on), True
             imgui.same_line()
             imgui.begin_disabled(not self.max_error_on)
+            # no label of its own: the rest of the line (the panel's item
+            # width keeps room for a label and left it a sliver in a narrow panel)
+            imgui.set_next_item_width(imgui.get_content_region_avail().x)
             c, v = _float("##maxerror", self.max_error, 0.0005, 1e-4, 1.0, "RMSE %.4f", imgui.SliderFlags_.logarithmic)
             if c:
                 self.max_error, res.quality_changed = v, True
