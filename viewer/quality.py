@@ -281,7 +281,7 @@ class Cache:
         """The measurements stored for this key ({} when there are none, or
         when the file is unreadable: then warn once)."""
         try:
-            text = self.path.read_text(encoding="utf-8")
+            text = self.path.read_bytes()   # decoded below: bytes that are not UTF-8 are a corrupt file
         except FileNotFoundError:
             return {}
         except OSError as e:
@@ -289,7 +289,7 @@ class Cache:
                                        "measuring again")
             return {}
         try:
-            doc = json.loads(text)
+            doc = json.loads(text.decode("utf-8"))
             if doc.get("key") != json.loads(json.dumps(self.key.as_dict())):
                 raise ValueError("stored for another key")
             out = {}
@@ -309,10 +309,12 @@ class Cache:
     def load_reference(self) -> np.ndarray | None:
         try:
             ref = np.load(self.ref_path)
-        except (OSError, ValueError):
+        except (OSError, ValueError, EOFError):   # EOFError: an empty (truncated) file
             return None
         w, h = self.key.layout.size
-        if ref.shape != (h, w, 3) or not np.all(np.isfinite(ref)):
+        # an .npz archive or an array of strings is no reference either
+        if (not isinstance(ref, np.ndarray) or ref.dtype.kind not in "fiu" or ref.shape != (h, w, 3)
+                or not np.all(np.isfinite(ref))):
             return None
         return ref.astype(np.float64)
 

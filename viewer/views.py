@@ -4,6 +4,8 @@ legend (PNG) or raw values (.npy / .pfm)."""
 
 from __future__ import annotations
 
+import colorsys
+
 import numpy as np
 
 VIEWS = ("normals", "depth", "objects", "cost", "samples")
@@ -14,6 +16,21 @@ _HEAT = np.array([[0.02, 0.02, 0.15], [0.30, 0.05, 0.50], [0.75, 0.20, 0.35], [0
                   [0.99, 0.95, 0.55]])
 _PALETTE = np.array([[0.90, 0.30, 0.25], [0.30, 0.65, 0.95], [0.95, 0.80, 0.25], [0.45, 0.80, 0.40],
                      [0.75, 0.45, 0.90], [0.95, 0.55, 0.20], [0.40, 0.85, 0.85], [0.85, 0.85, 0.85]])
+
+
+def _object_palette(n: int = 256) -> np.ndarray:
+    """(n, 3) display colours of the objects view: the 8 of _PALETTE first,
+    then hues spaced by the golden angle at alternating saturation and
+    value, so that no two of the 256 objects a scene may hold share a colour
+    (a repeating palette drew objects 8, 16, ... in the floor's)."""
+    cols = [tuple(c) for c in _PALETTE]
+    for k in range(n - len(_PALETTE)):
+        cols.append(colorsys.hsv_to_rgb((k * 0.6180339887498949) % 1.0, 0.55 if k % 2 == 0 else 0.85,
+                                        0.95 if (k // 2) % 2 == 0 else 0.70))
+    return np.array(cols)
+
+
+_OBJECT_COLOURS = _object_palette()
 
 
 def heat(x: np.ndarray) -> np.ndarray:
@@ -47,9 +64,11 @@ def _legend(width: int, lo: float, hi: float, unit: str) -> np.ndarray:
     bar = np.repeat(heat(np.linspace(0, 1, width))[None], 16, axis=0)
     im = Image.fromarray(np.round(bar * 255).astype(np.uint8))
     draw = ImageDraw.Draw(im)
-    left, right = f"{lo:g} {unit}", f"{hi:g} {unit}"
+    # four significant digits, not a fixed number of decimals: a scene in
+    # micrometres has depths of 1e-6 (its legend read "0 ... 0.001")
+    left, right = f"{lo:.4g} {unit}", f"{hi:.4g} {unit}"
     if draw.textlength(left) + draw.textlength(right) + 8 > width:
-        left, right = f"{lo:g}", f"{hi:g}"           # a narrow image: the numbers only
+        left, right = f"{lo:.4g}", f"{hi:.4g}"       # a narrow image: the numbers only
     draw.text((2, 2), left, fill=(255, 255, 255))
     tw = draw.textlength(right)
     if draw.textlength(left) + tw + 8 <= width:
@@ -66,7 +85,7 @@ def picture(view: str, raw: np.ndarray) -> np.ndarray:
         return np.where(hit, 0.5 + 0.5 * raw, 0.0)
     if view == "objects":
         idx = v.round().astype(int)
-        out = _PALETTE[np.maximum(idx, 0) % len(_PALETTE)]
+        out = _OBJECT_COLOURS[np.clip(idx, 0, len(_OBJECT_COLOURS) - 1)]
         return np.where((idx >= 0)[..., None], out, 0.0)
     finite = np.isfinite(v)
     lo, hi = (float(v[finite].min()), float(v[finite].max())) if finite.any() else (0.0, 1.0)
@@ -83,4 +102,4 @@ def picture(view: str, raw: np.ndarray) -> np.ndarray:
         norm = (v - lo) / max(hi - lo, 1e-12)
     img = np.where(finite[..., None], heat(norm), 0.0)
     unit = {"cost": "rays", "samples": "samples (log)"}.get(view, "(log)")
-    return np.concatenate([img, _legend(raw.shape[1], round(lo, 3), round(hi, 3), unit)], axis=0)
+    return np.concatenate([img, _legend(raw.shape[1], lo, hi, unit)], axis=0)
