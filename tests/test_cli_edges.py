@@ -162,6 +162,29 @@ def test_timing_a_debug_view_is_a_usage_error(tmp_path, view):
     assert not (tmp_path / "v.png").exists()
 
 
+@pytest.mark.parametrize("args, says", [
+    (["--view", "cost", "--adaptive"], "--view cost traces one centred ray per pixel; --adaptive does not apply"),
+    (["--view", "depth", "--target-error", "0.01"],
+     "--view depth traces one centred ray per pixel; --target-error does not apply"),
+    (["--view", "objects", "--max-error", "0.02"],
+     "--view objects shows the first hit, which --max-error's settings do not change; drop --max-error"),
+    (["--target-error", "0.01", "--no-adaptive"], "--target-error is the adaptive render's target; drop --no-adaptive"),
+])
+def test_sampling_options_a_render_would_ignore_are_usage_errors(tmp_path, args, says):
+    # silently dropped before: the picture was the same with or without them
+    r = glassray("render", "-o", tmp_path / "v.png", "--size", "32x18", "--samples", "1", *args)
+    assert r.returncode == 2
+    assert one_message(r) == f"glassray: {says}"
+    assert not (tmp_path / "v.png").exists()
+
+
+def test_the_options_that_do_apply_to_a_view_still_work(tmp_path):
+    # cost counts the rays the picked settings trace; --no-adaptive is the default anyway
+    for args in (["--view", "cost", "--no-adaptive"], ["--view", "samples", "--target-error", "0.05"]):
+        r = glassray("render", "-o", tmp_path / "v.npy", "--size", "32x18", "--samples", "2", *args)
+        assert r.returncode == 0, r.stderr
+
+
 @pytest.mark.parametrize("extra", [[], ["--adaptive"]])
 def test_the_timing_line_is_the_last_line_on_stderr(tmp_path, extra):
     r = glassray("render", "glass-sphere", "-o", tmp_path / "t.png", "--size", "32x18", "--samples", "4",

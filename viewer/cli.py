@@ -308,6 +308,17 @@ def cmd_render(args) -> int:
     adaptive = _adaptive(args)
     if args.view == "samples" and not adaptive:      # bad usage: before any OpenGL
         raise UsageError("--view samples shows an adaptive render's samples per pixel; drop --no-adaptive")
+    if args.target_error is not None and args.adaptive is False:
+        raise UsageError("--target-error is the adaptive render's target; drop --no-adaptive")
+    first_hit_or_cost = args.view in ("normals", "depth", "objects", "cost")
+    if first_hit_or_cost and (args.adaptive or args.target_error is not None):
+        # these views trace one centred ray per pixel: sampling options would be ignored
+        given = "--adaptive" if args.adaptive else "--target-error"
+        raise UsageError(f"--view {args.view} traces one centred ray per pixel; {given} does not apply")
+    if args.view in ("normals", "depth", "objects") and getattr(args, "max_error", None) is not None:
+        # the settings --max-error picks (samples, depth, weight) never change a first hit
+        raise UsageError(f"--view {args.view} shows the first hit, which --max-error's settings do not change; "
+                         "drop --max-error")
     if args.timing and args.view != "color":
         # the spec's line is the time of the image; a debug picture's would
         # pass for it and tell nothing about rendering
