@@ -73,3 +73,15 @@ def make_scene(doc: dict, name: str = "test"):
 
 def mean_abs(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.mean(np.abs(np.asarray(a, np.float64) - np.asarray(b, np.float64))))
+
+
+def no_matplotlib_env(tmp_path) -> dict:
+    """An environment whose `import matplotlib` fails (a stub first on the path)."""
+    import os
+
+    stub = tmp_path / "no-mpl" / "matplotlib"
+    stub.mkdir(parents=True)
+    (stub / "__init__.py").write_text("raise ImportError('No module named matplotlib')\n")
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (str(stub.parent), env.get("PYTHONPATH", "")) if p)
+    return env

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import make_scene
+from conftest import make_scene, no_matplotlib_env
 from viewer import bench
 
 
@@ -580,3 +580,80 @@ def test_warm_up_stops_when_nothing_is_built_and_gives_up_at_the_limit():
         return len(calls)
 
     assert bench.warm_up(r, always) == bench.WARM_UP_RENDERS == len(calls)
+
+
+# ---------------------------------------------------------------- outputs (audit)
+
+
+def test_bench_without_matplotlib_removes_an_earlier_runs_plots(tmp_path):
+    """The plots of an earlier run must not stay next to results they do not show."""
+    out = tmp_path / "out"
+    out.mkdir()
+    for name in ("pareto.png", "pareto-cpu.png"):
+        (out / name).write_bytes(b"\x89PNG\r\n\x1a\n an earlier run")
+    proc = subprocess.run([sys.executable, "-m", "viewer", "bench", "glass-sphere", "--quick", "--size", "8x8",
+                           "--repeat", "1", "--out", str(out)], capture_output=True, text=True, timeout=120,
+                          env=no_matplotlib_env(tmp_path))
+    assert proc.returncode == 0, proc.stderr
+    assert "glassray[bench]" in proc.stdout
+    assert not (out / "pareto.png").exists() and not (out / "pareto-cpu.png").exists()
+    assert "removed the plots of an earlier run" in proc.stdout
+    assert (out / "results.csv").is_file()
+
+
+def test_bench_scene_named_twice_is_bad_usage(tmp_path):
+    # it used to run both, and the second overwrote the first's table, summary and plot
+    proc = _bench("--scenes", "glass-sphere,glass-sphere", "--quick", "--size", "8x8", "--repeat", "1",
+                  "--out", str(tmp_path / "o"))
+    assert proc.returncode == 2
+    assert "glass-sphere more than once" in proc.stderr and "Traceback" not in proc.stderr
+
+
+def test_bench_empty_out_is_bad_usage(tmp_path):
+    # it used to write the results into the current folder
+    proc = _bench("glass-sphere", "--quick", "--size", "8x8", "--repeat", "1", "--out", "", cwd=tmp_path)
+    assert proc.returncode == 2 and "--out names no folder" in proc.stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_bench_scenes_with_the_same_file_name_are_told_apart(tmp_path):
+    from viewer.scene import load_scene, scene_to_toml
+
+    for sub, name in (("a", "glass-sphere"), ("b", "bench-opaque")):
+        (tmp_path / sub).mkdir()
+        (tmp_path / sub / "s.toml").write_text(scene_to_toml(load_scene(name)))
+    out = tmp_path / "out"
+    proc = _bench("--scenes", f"{tmp_path / 'a' / 's.toml'},{tmp_path / 'b' / 's.toml'}", "--quick",
+                  "--size", "8x8", "--repeat", "1", "--out", str(out))
+    assert proc.returncode == 0, proc.stderr
+    rows = list(csv.DictReader((out / "results.csv").open()))
+    assert {r["scene"] for r in rows} == {"s", "s-2"}
+    assert sum(r["scene"] == "s" for r in rows) == sum(r["scene"] == "s-2" for r in rows) > 0
+    assert "### s: " in proc.stdout and "### s-2: " in proc.stdout
+    info = json.loads((out / "machine.json").read_text())
+    assert set(info["programs_built_in_timed_rounds"]) == {"s", "s-2"}
+
+
+def test_bench_unwritable_result_names_the_file_and_keeps_the_tables(monkeypatch, tmp_path, capsys):
+    """A full disk: one message naming the file, exit 1, and the tables still on stdout."""
+    import argparse
+    import errno
+
+    import viewer.scene
+
+    real = viewer.scene.write_atomic
+
+    def full_disk(path, data):
+        if Path(path).name == "results.md":
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real(path, data)
+
+    monkeypatch.setattr(viewer.scene, "write_atomic", full_disk)
+    p = argparse.ArgumentParser()
+    bench.add_arguments(p)
+    p.add_argument("--debug", action="store_true")
+    args = p.parse_args(["glass-sphere", "--quick", "--size", "8x8", "--repeat", "1", "--out", str(tmp_path)])
+    assert bench.run(args) == 1
+    cap = capsys.readouterr()
+    assert f"{tmp_path / 'results.md'}: cannot write: No space left on device" in cap.err
+    assert "### glass-sphere" in cap.out

@@ -325,3 +325,19 @@ def test_bench_peer_end_to_end(tmp_path):
         assert "glassray[bench]" in proc.stdout
     else:
         assert (out / "peer.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_bench_peer_without_matplotlib_removes_an_earlier_runs_plot(tmp_path):
+    """peer.png of an earlier run must not stay next to results it does not show."""
+    from conftest import no_matplotlib_env
+
+    env = no_matplotlib_env(tmp_path)
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "peer.png").write_bytes(b"\x89PNG\r\n\x1a\n an earlier run")
+    proc = subprocess.run([sys.executable, "-m", "viewer", "bench", "--peer", "mitsuba", "--size", "16x9",
+                           "--quick", "--repeat", "1", "--out", str(out)],
+                          capture_output=True, text=True, timeout=300, env=env)
+    assert proc.returncode == 0, proc.stderr
+    assert "glassray[bench]" in proc.stdout and "removed the plot of an earlier run" in proc.stdout
+    assert not (out / "peer.png").exists() and (out / "peer.csv").is_file()

@@ -134,3 +134,68 @@ def test_exit_status_1_when_a_case_exceeds_its_tolerance(monkeypatch, tmp_path, 
     assert stress.run(args) == 1
     out = capsys.readouterr().out
     assert "FAIL" in out and "failed: axis-x-strict" in out
+
+
+# ---------------------------------------------------------------- outputs (audit)
+
+
+def _args(tmp_path, **kw) -> argparse.Namespace:
+    a = dict(list=False, case=["axis-x"], size=(16, 9), out=str(tmp_path / "res"), columns=3, naive=False,
+             intersections=False, backend="auto", debug=False)
+    a.update(kw)
+    return argparse.Namespace(**a)
+
+
+def test_results_md_names_the_machine_and_the_renderer(gl, tmp_path):
+    from viewer.bench import machine_info
+    from viewer.context import describe
+
+    assert stress.run(_args(tmp_path)) == 0
+    md = (tmp_path / "res" / "results.md").read_text()
+    mi = machine_info()
+    assert describe(gl) in md
+    assert f"{mi['cpu'] or mi['machine']} ({mi['cpus_usable']} usable CPUs)" in md and mi["platform"] in md
+
+
+@pytest.mark.parametrize("args, text", [
+    (["--columns", "0"], "1..1000"),
+    (["--columns", "-2"], "1..1000"),
+    (["--out", ""], "--out names no folder"),
+])
+def test_bad_columns_and_empty_out_are_bad_usage(args, text, tmp_path):
+    # they used to be taken: 0 and -2 columns as 1, "" as the current folder
+    r = _stress("--case", "axis-x", "--size", "8x8", *args, cwd=tmp_path)
+    assert r.returncode == 2 and text in r.stderr and "Traceback" not in r.stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_unwritable_out_is_found_before_the_cases_run(monkeypatch, tmp_path, capsys):
+    import errno
+    from pathlib import Path
+
+    real = Path.write_bytes
+
+    def read_only(self, data):
+        if self.parent == tmp_path / "res":
+            raise OSError(errno.EROFS, "Read-only file system")
+        return real(self, data)
+
+    monkeypatch.setattr(Path, "write_bytes", read_only)
+    monkeypatch.setattr(stress.Suite, "run_case", lambda *a: pytest.fail("a case ran before the folder was checked"))
+    assert stress.run(_args(tmp_path)) == 1
+    assert "cannot write results there: Read-only file system" in capsys.readouterr().err
+
+
+def test_full_disk_names_the_file(monkeypatch, tmp_path, capsys):
+    import errno
+
+    import viewer.scene
+
+    def full_disk(path, data):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(viewer.scene, "write_atomic", full_disk)
+    assert stress.run(_args(tmp_path)) == 1
+    cap = capsys.readouterr()
+    assert "res/contact-sheet.png: cannot write: No space left on device" in cap.err
+    assert "axis-x" in cap.out and "Traceback" not in cap.err

@@ -404,11 +404,9 @@ def reference_image(scene, stem: str, width: int, height: int, samples: int, cac
         finally:
             r.release()
     if path is not None:
-        from .scene import write_atomic
-
         buf = io.BytesIO()
         np.save(buf, img)
-        write_atomic(path, buf.getvalue())
+        write_output(path, buf.getvalue())
     return img, kind, False
 
 
@@ -669,14 +667,12 @@ def _row(res: Result) -> dict:
 
 
 def write_csv(path: Path, results: list[Result]) -> None:
-    from .scene import write_atomic
-
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=CSV_COLUMNS, lineterminator="\n")
     w.writeheader()
     for res in results:
         w.writerow(_row(res))
-    write_atomic(path, buf.getvalue().encode("utf-8"))
+    write_output(path, buf.getvalue().encode("utf-8"))
 
 
 def speedup(results: list[Result], a: str = "generic", b: str = "default", clock: str = "wall") -> float | None:
@@ -904,9 +900,7 @@ def plot(path: Path, by_scene: dict[str, list[Result]], titles: dict[str, str], 
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=90)
     plt.close(fig)
-    from .scene import write_atomic
-
-    write_atomic(path, buf.getvalue())
+    write_output(path, buf.getvalue())
     return True
 
 
@@ -970,6 +964,52 @@ def _log(msg: str) -> None:
     print(f"bench: {msg}", file=sys.stderr, flush=True)
 
 
+class OutputError(Exception):
+    """An output file could not be written (the message names it)."""
+
+
+def write_output(path: Path, data: bytes) -> None:
+    """write_atomic, with an OSError (a full disk, a read-only folder)
+    turned into an OutputError that names the file: the OSError of a failed
+    write names at most the temporary file, and often nothing."""
+    from .scene import write_atomic
+
+    try:
+        write_atomic(path, data)
+    except OSError as e:
+        raise OutputError(f"{path}: cannot write: {e.strerror or e}") from e
+
+
+def results_folder_problem(out: Path) -> str | None:
+    """Why results cannot be written into the folder `out` (made if
+    missing), or None: checked before a run, not found after it."""
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        probe = out / ".write-test"
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as e:
+        return f"{out}: cannot write results there: {e.strerror or e}"
+    return None
+
+
+def _unique_stems(names: list[str]) -> list[str] | None:
+    """A distinct stem (the scene column, the table and plot title, the
+    reference's file name) per scene: a file's name without .toml, with
+    "-2", "-3", ... after the second and later of the same stem (a.toml and
+    other/a.toml).  None if a scene is named twice."""
+    if len(set(names)) != len(names):
+        return None
+    stems: list[str] = []
+    for name in names:
+        stem = base = _stem(name, None)
+        k = 2
+        while stem in stems:
+            stem, k = f"{base}-{k}", k + 1
+        stems.append(stem)
+    return stems
+
+
 def run(args) -> int:
     from .scene import SceneError, builtin_scene_names, load_scene
 
@@ -986,6 +1026,13 @@ def run(args) -> int:
         (["whitted-exact"] if peer else list(DEFAULT_SCENES)))
     if not names:
         print("glassray bench: --scenes names no scene", file=sys.stderr)
+        return 2
+    if _unique_stems(names) is None:
+        twice = sorted({n for n in names if names.count(n) > 1})
+        print(f"glassray bench: --scenes names {', '.join(twice)} more than once", file=sys.stderr)
+        return 2
+    if not str(args.out):
+        print("glassray bench: --out names no folder", file=sys.stderr)
         return 2
     scenes = []
     for name in names:
@@ -1007,13 +1054,9 @@ def run(args) -> int:
     width, height = args.size
     ref_samples = args.reference_samples or (QUICK_REFERENCE_SAMPLES if args.quick else DEFAULT_REFERENCE_SAMPLES)
     out = Path(args.out)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-        probe = out / ".write-test"
-        probe.write_bytes(b"")
-        probe.unlink()
-    except OSError as e:
-        print(f"glassray: {args.out}: cannot write results there: {e.strerror or e}", file=sys.stderr)
+    problem = results_folder_problem(out)
+    if problem:
+        print(f"glassray: {problem}", file=sys.stderr)
         return 1
 
     from .context import ContextError, create_offscreen_context
@@ -1032,6 +1075,11 @@ def run(args) -> int:
     except KeyboardInterrupt:
         print("glassray: interrupted", file=sys.stderr)
         return 130
+    except OutputError as e:
+        if debug:
+            raise
+        print(f"glassray: {e}", file=sys.stderr)
+        return 1
     except Exception as e:
         if debug:
             raise
@@ -1081,8 +1129,9 @@ def _run(args, ctx, backend, scenes, width, height, ref_samples, out: Path) -> i
     by_scene: dict[str, list[Result]] = {}
     titles: dict[str, str] = {}
     started = time.perf_counter()
-    for name, scene in scenes:
-        stem = _stem(name, scene)
+    for (name, scene), stem in zip(scenes, _unique_stems([n for n, _ in scenes])):
+        if stem != _stem(name, scene):
+            _log(f"{name}: called {stem} in the results (another scene has the same name)")
         settings = sweep(scene, quick=args.quick, reference_samples=ref_samples)
         from .gpu_scene import GENERIC_LENS
 
@@ -1126,25 +1175,33 @@ def _run(args, ctx, backend, scenes, width, height, ref_samples, out: Path) -> i
     info["programs_built_in_timed_rounds"] = {stem: sum(r.built_in_timed for r in res)
                                               for stem, res in by_scene.items()}
 
-    from .scene import write_atomic
-
-    write_csv(out / "results.csv", all_results)
     tables = []
     for stem, res in by_scene.items():
         tables.append(scene_table(res, titles[stem]) + "\n\n"
                       + "\n".join(f"- {s}" for s in scene_summary(res, args.time_tolerance, args.error_tolerance)))
     text = "\n\n".join(["\n".join(f"    {h}" for h in header), *tables]) + "\n"
-    write_atomic(out / "results.md", text.encode("utf-8"))
-    write_atomic(out / "machine.json", (json.dumps(info, indent=2) + "\n").encode("utf-8"))
+    # the tables first: a run's results are not lost if its files cannot be written (a full disk)
+    print(text, end="", flush=True)
+    print()
+    write_csv(out / "results.csv", all_results)
+    write_output(out / "results.md", text.encode("utf-8"))
+    write_output(out / "machine.json", (json.dumps(info, indent=2) + "\n").encode("utf-8"))
     subtitle = (f"glassray bench, {width}x{height}, {info['gl'].split(' / ')[0]}, {info['cpus_usable']} CPUs; "
                 f"reference {ref_samples}{f'/{refine}' if refine else ''} spp ({kind}); {info['date'][:10]}")
     plotted = (plot(out / "pareto.png", by_scene, titles, subtitle + "; wall-clock frame time", "wall")
                and plot(out / "pareto-cpu.png", by_scene, titles, subtitle + "; CPU time of all threads", "cpu"))
 
-    print(text, end="")
-    print()
     print(f"wrote {out / 'results.csv'}, {out / 'results.md'}, {out / 'machine.json'}"
           + (f", {out / 'pareto.png'}, {out / 'pareto-cpu.png'}" if plotted else ""))
     if not plotted:
         print("no plot: pareto.png needs matplotlib (pip install 'glassray[bench]')")
+        # an earlier run's plots would sit next to these results as if they were theirs
+        stale = [p for p in (out / "pareto.png", out / "pareto-cpu.png") if p.is_file()]
+        for p in stale:
+            try:
+                p.unlink()
+            except OSError as e:
+                raise OutputError(f"{p}: an earlier run's plot, cannot remove it: {e.strerror or e}") from e
+        if stale:
+            print(f"removed the plots of an earlier run: {', '.join(str(p) for p in stale)}")
     return 0

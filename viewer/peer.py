@@ -799,7 +799,7 @@ def _plot(path, series: dict[str, list[Point]], targets, subtitle: str) -> bool:
         return False
     import io
 
-    from .scene import write_atomic
+    from .bench import write_output as write_atomic     # an OSError becomes a message naming the file
 
     styles = {"glassray": ("#d62728", "o"), "mitsuba": ("#1f77b4", "s"), "glassray adaptive": ("#2ca02c", "^")}
     fig, axes = plt.subplots(1, 2, figsize=(12.0, 4.8))
@@ -843,8 +843,8 @@ def run_bench(args, ctx, backend: str, name: str, scene, width: int, height: int
     from pathlib import Path
 
     from . import bench
+    from .bench import write_output as write_atomic     # an OSError becomes a message naming the file
     from .renderer import Renderer
-    from .scene import write_atomic
 
     out = Path(out)
     stem = Path(name).stem if str(name).endswith(".toml") else name
@@ -1020,4 +1020,11 @@ def run_bench(args, ctx, backend: str, name: str, scene, width: int, height: int
           f"{out / 'peer-machine.json'}" + (f", {out / 'peer.png'}" if plotted else ""))
     if not plotted:
         print("no plot: peer.png needs matplotlib (pip install 'glassray[bench]')")
+        stale = out / "peer.png"              # an earlier run's: it would pass for this one's
+        if stale.is_file():
+            try:
+                stale.unlink()
+            except OSError as e:
+                raise bench.OutputError(f"{stale}: an earlier run's plot, cannot remove it: {e.strerror or e}") from e
+            print(f"removed the plot of an earlier run: {stale}")
     return 0

@@ -921,14 +921,15 @@ def camera_relative_errors(offsets=(0.0, 1e2, 1e4, 1e6), n: int = 20000, seed: i
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--list", action="store_true", help="list the cases with what they test and their tolerance")
     p.add_argument("--case", action="append", metavar="NAME", help="run only this case (repeatable)")
-    from .cli import size_type
+    from .cli import int_range, size_type
 
     p.add_argument("--size", type=size_type(4, 4096), default=DEFAULT_SIZE, metavar="WxH",
                    help="image size of every case (%dx%d); cases that need a pixel on the view axis use "
                         "the next odd width and height" % DEFAULT_SIZE)
     p.add_argument("--out", default=DEFAULT_OUT, metavar="DIR",
                    help=f"folder for contact-sheet.png and results.md (./{DEFAULT_OUT})")
-    p.add_argument("--columns", type=int, default=3, metavar="N", help="cases per row of the contact sheet (3)")
+    p.add_argument("--columns", type=int_range(1, 1000), default=3, metavar="N",
+                   help="cases per row of the contact sheet (3)")
     p.add_argument("--naive", action="store_true",
                    help="measure the textbook intersection formulas instead (NAIVE_INTERSECT)")
     p.add_argument("--intersections", action="store_true",
@@ -951,13 +952,16 @@ def run(args) -> int:
     if unknown:
         print(f"glassray stress: unknown case {', '.join(map(repr, unknown))} (see --list)", file=sys.stderr)
         return 2
+    if not str(args.out):
+        print("glassray stress: --out names no folder", file=sys.stderr)
+        return 2
     out = Path(args.out)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        print(f"glassray: {args.out}: cannot write results there: {e.strerror or e}", file=sys.stderr)
-        return 1
+    from .bench import OutputError, results_folder_problem
 
+    problem = results_folder_problem(out)     # before the cases run, not after them
+    if problem:
+        print(f"glassray: {problem}", file=sys.stderr)
+        return 1
     from .context import ContextError, create_offscreen_context, describe
 
     try:
@@ -976,19 +980,24 @@ def run(args) -> int:
             print(f"stress: {name}: {'ok' if results[-1].ok else 'FAIL'}", file=sys.stderr, flush=True)
         variant = "textbook intersections (NAIVE_INTERSECT)" if args.naive else "robust intersections"
         head = f"glassray stress: {len(results)} cases, {variant}, {describe(ctx)}"
+        from .bench import machine_info
+
+        mi = machine_info()
+        machine = (f"{mi['date']}, {mi['cpu'] or mi['machine']} ({mi['cpus_usable']} usable CPUs), "
+                   f"{mi['platform']}, glassray {mi['glassray']}")
         text = format_table(results)
         _print(head)
         _print(text)
         failed = [r.name for r in results if not r.ok]
         _print(f"{len(results) - len(failed)} of {len(results)} cases within tolerance"
                + (f"; failed: {', '.join(failed)}" if failed else ""))
-        md = f"{head}\n\n{format_table(results, markdown=True)}\n"
+        md = f"{head}\n\nmachine: {machine}\n\n{format_table(results, markdown=True)}\n"
         if args.intersections:
             stats = intersection_errors(ctx)
             _print("\nfloat32 relative error of t, first hit against the float64 reference:")
             _print(format_errors(stats, markdown=False))
             md += "\n" + format_errors(stats) + "\n"
-        from .scene import write_atomic
+        from .bench import write_output as write_atomic     # an OSError becomes a message naming the file
         import io
 
         buf = io.BytesIO()
@@ -1000,6 +1009,11 @@ def run(args) -> int:
     except KeyboardInterrupt:
         print("glassray: interrupted", file=sys.stderr)
         return 130
+    except OutputError as e:
+        if getattr(args, "debug", False):
+            raise
+        print(f"glassray: {e}", file=sys.stderr)
+        return 1
     except Exception as e:
         if getattr(args, "debug", False):
             raise
