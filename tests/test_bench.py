@@ -657,3 +657,11 @@ def test_bench_unwritable_result_names_the_file_and_keeps_the_tables(monkeypatch
     cap = capsys.readouterr()
     assert f"{tmp_path / 'results.md'}: cannot write: No space left on device" in cap.err
     assert "### glass-sphere" in cap.out
+
+
+def test_peer_time_limit_without_peer_is_bad_usage(tmp_path):
+    # it used to be accepted and ignored
+    proc = _bench("glass-sphere", "--peer-time-limit", "30", "--quick", "--size", "8x8", "--repeat", "1",
+                  "--out", str(tmp_path / "o"))
+    assert proc.returncode == 2 and "--peer-time-limit" in proc.stderr and "needs --peer" in proc.stderr
+    assert not (tmp_path / "o").exists()

@@ -1021,6 +1021,9 @@ def run(args) -> int:
     if peer and args.scenes:
         print("glassray bench: --peer compares on one SCENE, not --scenes", file=sys.stderr)
         return 2
+    if not peer and getattr(args, "peer_time_limit", None) is not None:
+        print("glassray bench: --peer-time-limit limits the peer's renders; it needs --peer", file=sys.stderr)
+        return 2
     names = [args.scene] if args.scene else (
         [s.strip() for s in args.scenes.split(",") if s.strip()] if args.scenes else
         (["whitted-exact"] if peer else list(DEFAULT_SCENES)))
