@@ -12,10 +12,14 @@ OPTIONAL_APT := libllvm19
 
 .PHONY: run test system-deps venv clean
 
-# Install Mesa (EGL + OSMesa), Xvfb and xdotool when any is missing and we can.
+# Install Mesa (EGL + OSMesa), Xvfb and xdotool when any is missing and we can,
+# and python3-venv when $(PYTHON) cannot make the virtual environment (Debian's
+# python3 has no ensurepip without it).
 system-deps:
 	@missing=""; for p in $(APT_PACKAGES); do \
 	  dpkg -s $$p >/dev/null 2>&1 || missing="$$missing $$p"; done; \
+	if [ ! -x $(PY) ] && ! $(PYTHON) -c "import ensurepip, venv" >/dev/null 2>&1; then \
+	  missing="$$missing python3-venv"; fi; \
 	if [ -n "$$missing" ]; then \
 	  if command -v apt-get >/dev/null 2>&1 && [ "$$(id -u)" = 0 ]; then \
 	    echo "installing system packages:$$missing"; \
