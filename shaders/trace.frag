@@ -466,7 +466,7 @@ void walkNode(Branch br, inout vec3 sum, out Branch reflected, out Branch refrac
     // a ray of the principal chain on the checkered plane its pixel's
     // footprint lies on: the checker's colours mixed by their share of the
     // pixel
-    if (takesFootprint(it.object, br.chain, it.p))
+    if (takesFootprint(it.object, br.chain))
         s = Surface(mix(m.colorAmbient.rgb, m.checkerColor.rgb, footprintShare),
                     mix(m.emission.rgb, m.checkerEmission.rgb, footprintShare));
 #endif
