@@ -385,7 +385,7 @@ help_rect = (0.0, 0.0, 0.0, 0.0)  # where the help window is: x0, y0, x1, y1 (te
 
 def draw_help(size: tuple[int, int]) -> bool:
     """The help overlay; returns False when its close button was pressed."""
-    global _help_drawn_size
+    global _help_drawn_size, help_rect
     w, h = size
     # centred when it opens, and again when the window's size changed (as
     # the panel: left where it was, it could end up outside a smaller window)
@@ -397,7 +397,6 @@ def draw_help(size: tuple[int, int]) -> bool:
     flags = imgui.WindowFlags_.no_saved_settings | imgui.WindowFlags_.no_collapse | \
         imgui.WindowFlags_.always_auto_resize
     visible, keep_open = imgui.begin("Controls (H / F1 to close)", True, flags)
-    global help_rect
     pos, wsize = imgui.get_window_pos(), imgui.get_window_size()
     help_rect = (pos.x, pos.y, pos.x + wsize.x, pos.y + wsize.y)
     if visible:
