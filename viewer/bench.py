@@ -993,6 +993,18 @@ def results_folder_problem(out: Path) -> str | None:
     return None
 
 
+def remove_stale(paths: list[Path]) -> list[Path]:
+    """Remove the files of `paths` that exist (an earlier run's plots, which
+    would pass for this run's); returns those removed."""
+    stale = [p for p in paths if p.is_file()]
+    for p in stale:
+        try:
+            p.unlink()
+        except OSError as e:
+            raise OutputError(f"{p}: an earlier run's plot, cannot remove it: {e.strerror or e}") from e
+    return stale
+
+
 def _unique_stems(names: list[str]) -> list[str] | None:
     """A distinct stem (the scene column, the table and plot title, the
     reference's file name) per scene: a file's name without .toml, with
@@ -1198,13 +1210,7 @@ def _run(args, ctx, backend, scenes, width, height, ref_samples, out: Path) -> i
           + (f", {out / 'pareto.png'}, {out / 'pareto-cpu.png'}" if plotted else ""))
     if not plotted:
         print("no plot: pareto.png needs matplotlib (pip install 'glassray[bench]')")
-        # an earlier run's plots would sit next to these results as if they were theirs
-        stale = [p for p in (out / "pareto.png", out / "pareto-cpu.png") if p.is_file()]
-        for p in stale:
-            try:
-                p.unlink()
-            except OSError as e:
-                raise OutputError(f"{p}: an earlier run's plot, cannot remove it: {e.strerror or e}") from e
+        stale = remove_stale([out / "pareto.png", out / "pareto-cpu.png"])
         if stale:
             print(f"removed the plots of an earlier run: {', '.join(str(p) for p in stale)}")
     return 0

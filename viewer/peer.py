@@ -799,7 +799,7 @@ def _plot(path, series: dict[str, list[Point]], targets, subtitle: str) -> bool:
         return False
     import io
 
-    from .bench import write_output as write_atomic     # an OSError becomes a message naming the file
+    from .bench import write_output     # an OSError becomes a message naming the file
 
     styles = {"glassray": ("#d62728", "o"), "mitsuba": ("#1f77b4", "s"), "glassray adaptive": ("#2ca02c", "^")}
     fig, axes = plt.subplots(1, 2, figsize=(12.0, 4.8))
@@ -830,7 +830,7 @@ def _plot(path, series: dict[str, list[Point]], targets, subtitle: str) -> bool:
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=90)
     plt.close(fig)
-    write_atomic(path, buf.getvalue())
+    write_output(path, buf.getvalue())
     return True
 
 
@@ -843,7 +843,7 @@ def run_bench(args, ctx, backend: str, name: str, scene, width: int, height: int
     from pathlib import Path
 
     from . import bench
-    from .bench import write_output as write_atomic     # an OSError becomes a message naming the file
+    from .bench import write_output     # an OSError becomes a message naming the file
     from .renderer import Renderer
 
     out = Path(out)
@@ -992,7 +992,7 @@ def run_bench(args, ctx, backend: str, name: str, scene, width: int, height: int
                         "cpu_ms": f"{p.cpu_ms:.4f}", "repeat": len(p.times), "rmse": f"{p.errors['rmse']:.10g}",
                         "frac_off_1_255": f"{p.errors['frac_off']:.6g}",
                         "max_abs_err": f"{p.errors['max_abs']:.6g}"})
-    write_atomic(out / "peer.csv", buf.getvalue().encode("utf-8"))
+    write_output(out / "peer.csv", buf.getvalue().encode("utf-8"))
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=TTE_CSV_COLUMNS, lineterminator="\n")
     w.writeheader()
@@ -1006,9 +1006,9 @@ def run_bench(args, ctx, backend: str, name: str, scene, width: int, height: int
                         "ratio_mitsuba_over_glassray": num(r[0]),
                         "glassray_adaptive_ms": num(ta[0]) if ta else "",
                         "ratio_mitsuba_over_adaptive": num(ra[0]) if ra else ""})
-    write_atomic(out / "peer-time-to-error.csv", buf.getvalue().encode("utf-8"))
-    write_atomic(out / "peer.md", text.encode("utf-8"))
-    write_atomic(out / "peer-machine.json", (json.dumps(info, indent=2) + "\n").encode("utf-8"))
+    write_output(out / "peer-time-to-error.csv", buf.getvalue().encode("utf-8"))
+    write_output(out / "peer.md", text.encode("utf-8"))
+    write_output(out / "peer-machine.json", (json.dumps(info, indent=2) + "\n").encode("utf-8"))
     plotted = _plot(out / "peer.png", series, TARGET_ERRORS,
                     f"glassray vs Mitsuba {info['peer']['mitsuba']} ({peer.variant}, {peer.threads} threads), "
                     f"{stem} {width}x{height}, {info['cpus_usable']} CPUs, reference {ref_samples}"
@@ -1020,11 +1020,6 @@ def run_bench(args, ctx, backend: str, name: str, scene, width: int, height: int
           f"{out / 'peer-machine.json'}" + (f", {out / 'peer.png'}" if plotted else ""))
     if not plotted:
         print("no plot: peer.png needs matplotlib (pip install 'glassray[bench]')")
-        stale = out / "peer.png"              # an earlier run's: it would pass for this one's
-        if stale.is_file():
-            try:
-                stale.unlink()
-            except OSError as e:
-                raise bench.OutputError(f"{stale}: an earlier run's plot, cannot remove it: {e.strerror or e}") from e
-            print(f"removed the plot of an earlier run: {stale}")
+        if bench.remove_stale([out / "peer.png"]):
+            print(f"removed the plot of an earlier run: {out / 'peer.png'}")
     return 0

@@ -997,13 +997,13 @@ def run(args) -> int:
             _print("\nfloat32 relative error of t, first hit against the float64 reference:")
             _print(format_errors(stats, markdown=False))
             md += "\n" + format_errors(stats) + "\n"
-        from .bench import write_output as write_atomic     # an OSError becomes a message naming the file
+        from .bench import write_output     # an OSError becomes a message naming the file
         import io
 
         buf = io.BytesIO()
         contact_sheet(results, columns=args.columns).save(buf, format="PNG", optimize=True)
-        write_atomic(out / "contact-sheet.png", buf.getvalue())
-        write_atomic(out / "results.md", md.encode("utf-8"))
+        write_output(out / "contact-sheet.png", buf.getvalue())
+        write_output(out / "results.md", md.encode("utf-8"))
         print(f"stress: wrote {out / 'contact-sheet.png'} and {out / 'results.md'}", file=sys.stderr)
         return 1 if failed else 0
     except KeyboardInterrupt:
