@@ -490,6 +490,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.command is None:
         parser.print_help()
         return 0
+    from .imageio import SkyImageError
     from .scene import SceneError
     from .shaders import ShaderError
 
@@ -506,7 +507,7 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("glassray: interrupted", file=sys.stderr)
         return 130
-    except (Failure, ShaderError) as e:
+    except (Failure, ShaderError, SkyImageError) as e:
         if args.debug:
             raise
         print(f"glassray: {e}", file=sys.stderr)

@@ -71,6 +71,11 @@ class ImageReadError(ValueError):
     radiances >= 0 (the message says which)."""
 
 
+class SkyImageError(RuntimeError):
+    """A valid sky picture the OpenGL driver cannot take (larger than its
+    largest texture): a failure of this machine, exit 1, not a bad scene."""
+
+
 def read_pfm(path: str | Path) -> np.ndarray:
     """(H, W, 3) float32, first row = top of the image.  The header is four
     whitespace-separated tokens (PF or Pf, width, height, scale), then one
@@ -138,13 +143,99 @@ def read_sky_image(path: str | Path) -> np.ndarray:
 
 
 def _read_picture(path: Path) -> np.ndarray:
+    return srgb_to_linear(read_picture_encoded(path)).astype(np.float32)
+
+
+def read_picture_encoded(path: str | Path) -> np.ndarray:
+    """A PNG or JPEG as (H, W, 3) float64 in [0, 1], still sRGB-encoded, at
+    its full depth: 16-bit PNGs (grey, grey+alpha, RGB, RGBA) keep all 16
+    bits.  An alpha channel (or a palette's transparency) is ignored: the
+    sky is the background, with nothing behind it to show through.
+    Pillow's warnings (a large picture, a palette with transparency) are
+    kept off stderr; a picture over Pillow's decompression-bomb limit is an
+    ImageReadError."""
+    import warnings
+
     from PIL import Image
 
-    with Image.open(path) as im:
-        im.load()
-        if im.mode in ("I;16", "I;16B", "I;16L", "I"):      # 16-bit grey: PIL's RGB would clip it to 8 bits
-            a = np.asarray(im, dtype=np.float64) / 65535.0
-            a = np.repeat(a[:, :, None], 3, axis=2)
-        else:
-            a = np.asarray(im.convert("RGB"), dtype=np.float64) / 255.0
-    return srgb_to_linear(a).astype(np.float32)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        try:
+            with Image.open(path) as im:
+                deep = im.format == "PNG" and _png16_colour(path)
+                im.load()
+                if deep:           # 16-bit colour: Pillow's RGB/RGBA/LA keep only the high 8 bits
+                    return _read_png16_colour(Path(path).read_bytes())
+                if im.mode in ("I;16", "I;16B", "I;16L", "I"):      # 16-bit grey: PIL's RGB would clip it to 8 bits
+                    a = np.asarray(im, dtype=np.float64) / 65535.0
+                    return np.repeat(a[:, :, None], 3, axis=2)
+                return np.asarray(im.convert("RGB"), dtype=np.float64) / 255.0
+        except Image.DecompressionBombError as e:       # not an OSError: it would escape as a crash
+            raise ImageReadError(f"cannot decode it: {e}") from None
+
+
+_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+#: Adam7 passes: first column, first row, column step, row step.
+_ADAM7 = ((0, 0, 8, 8), (4, 0, 8, 8), (0, 4, 4, 8), (2, 0, 4, 4), (0, 2, 2, 4), (1, 0, 2, 2), (0, 1, 1, 2))
+
+
+def _png16_colour(path) -> bool:
+    """Whether the PNG is 16-bit grey+alpha, RGB or RGBA (colour types 4, 2, 6)."""
+    with open(path, "rb") as f:
+        head = f.read(29)
+    return (len(head) == 29 and head[:8] == _PNG_SIGNATURE and head[12:16] == b"IHDR"
+            and head[24] == 16 and head[25] in (2, 4, 6))
+
+
+def _read_png16_colour(data: bytes) -> np.ndarray:
+    """A 16-bit grey+alpha, RGB or RGBA PNG as (H, W, 3) float64 in [0, 1]
+    (alpha dropped).  The scanlines are inflated here and unfiltered by
+    Pillow: PNG's filters work byte lane by byte lane (byte k of a pixel is
+    predicted from byte k of its neighbours), so each of the pixel's bytes
+    goes to Pillow as an 8-bit grey PNG with the same filter bytes."""
+    import struct
+    import zlib
+
+    from PIL import Image
+
+    w, h, _, ctype, _, _, interlace = struct.unpack(">IIBBBBB", data[16:29])
+    channels = {2: 3, 4: 2, 6: 4}[ctype]
+    bpp = 2 * channels
+    passes = _ADAM7 if interlace else ((0, 0, 1, 1),)
+    sizes = [(-(-(w - x0) // dx), -(-(h - y0) // dy)) if w > x0 and h > y0 else (0, 0)
+             for x0, y0, dx, dy in passes]
+    need = sum(ph * (1 + pw * bpp) for pw, ph in sizes if pw and ph)
+    idat, pos = [], 8
+    while pos + 8 <= len(data):
+        n, kind = struct.unpack(">I4s", data[pos:pos + 8])
+        if kind == b"IDAT":
+            idat.append(data[pos + 8:pos + 8 + n])
+        elif kind == b"IEND":
+            break
+        pos += 12 + n
+    try:
+        raw = zlib.decompressobj().decompress(b"".join(idat), need)
+    except zlib.error as e:
+        raise ImageReadError(f"cannot decode it (broken PNG data: {e})") from None
+    if len(raw) < need:
+        raise ImageReadError(f"cannot decode it (truncated PNG: {len(raw)} of {need} bytes of pixel data)")
+
+    def chunk(kind: bytes, body: bytes) -> bytes:
+        return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", zlib.crc32(kind + body))
+
+    out = np.empty((h, w, bpp), np.uint8)
+    start = 0
+    for (x0, y0, dx, dy), (pw, ph) in zip(passes, sizes):
+        if not (pw and ph):
+            continue
+        rows = np.frombuffer(raw, np.uint8, ph * (1 + pw * bpp), start).reshape(ph, 1 + pw * bpp)
+        start += rows.size
+        for k in range(bpp):
+            lane = np.empty((ph, 1 + pw), np.uint8)
+            lane[:, 0], lane[:, 1:] = rows[:, 0], rows[:, 1 + k::bpp]
+            grey = (_PNG_SIGNATURE + chunk(b"IHDR", struct.pack(">IIBBBBB", pw, ph, 8, 0, 0, 0, 0))
+                    + chunk(b"IDAT", zlib.compress(lane.tobytes(), 0)) + chunk(b"IEND", b""))
+            with Image.open(io.BytesIO(grey)) as im:
+                out[y0::dy, x0::dx, k] = np.asarray(im)
+    a = out.view(">u2").astype(np.float64) / 65535.0        # (h, w, channels), big-endian samples
+    return np.repeat(a[:, :, :1], 3, axis=2) if ctype == 4 else a[:, :, :3]

@@ -399,15 +399,9 @@ def _load_sky_image(path: Path) -> np.ndarray:
         if path.suffix.lower() == ".pfm":
             img = _read_pfm(path)
         else:
-            from PIL import Image
+            from .imageio import read_picture_encoded   # (16-bit colour PNGs at full depth)
 
-            with Image.open(path) as im:
-                if im.mode in ("I;16", "I;16B", "I;16L", "I"):
-                    a = np.asarray(im, dtype=np.float64) / 65535.0
-                    a = np.repeat(a[:, :, None], 3, axis=2)
-                else:
-                    a = np.asarray(im.convert("RGB"), dtype=np.float64) / 255.0
-            img = _srgb_to_linear(a)
+            img = _srgb_to_linear(read_picture_encoded(path))
         _SKY_CACHE[key] = img
     return _SKY_CACHE[key]
 

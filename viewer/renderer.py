@@ -17,7 +17,7 @@ import numpy as np
 
 from .gpu_scene import F32_MAX, camera_uniforms, gpu_frame_scene, pack_scene
 from . import interrupt
-from .imageio import read_sky_image
+from .imageio import SkyImageError, read_sky_image
 from .sampling import sample_offsets
 from .scene import Scene
 from .shaders import ShaderFiles, build_program
@@ -128,16 +128,20 @@ class Renderer:
         path = scene.sky.image_path if scene.sky.type == "image" else None
         if path == self._sky_path and self._sky is not None:
             return
-        if self._sky is not None:
-            self._sky.release()
         if path is not None:
             img = read_sky_image(path)
             h, w, _ = img.shape
+            limit = int(self.ctx.info["GL_MAX_TEXTURE_SIZE"])
+            if max(w, h) > limit:        # the driver would make an empty texture: a black sky
+                raise SkyImageError(f"sky.image: {path} is {w}x{h}, larger than the {limit}x{limit} texture "
+                                    "this OpenGL driver can hold; scale the picture down")
             tex = self.ctx.texture((w, h), 3, np.ascontiguousarray(img, dtype="f4").tobytes(), dtype="f4")
             tex.repeat_x, tex.repeat_y = True, False
         else:
             tex = self.ctx.texture((1, 1), 3, np.zeros(3, "f4").tobytes(), dtype="f4")
         tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
+        if self._sky is not None:        # only now: a picture refused above leaves the old sky working
+            self._sky.release()
         self._sky, self._sky_path = tex, path
 
     def _vao(self) -> moderngl.VertexArray:
