@@ -1119,7 +1119,7 @@ def test_save_fails_before_writing_if_the_scene_cannot_be_serialised(tmp_path, m
     target = tmp_path / "scene.toml"
     target.write_bytes(OLD)
 
-    def boom(scene):
+    def boom(scene, *args, **kwargs):
         raise RuntimeError("serialiser broke")
 
     monkeypatch.setattr(scene_mod, "scene_to_toml", boom)

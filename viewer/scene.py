@@ -11,6 +11,7 @@ one line on stderr and exit status 2.
 from __future__ import annotations
 
 import datetime
+import errno
 import math
 import os
 import re
@@ -139,6 +140,9 @@ class Scene:
     # how error messages name it: the file as given, or the built-in scene
     # (not compared: the same scene from another place is equal)
     source: str | None = field(default=None, compare=False)
+    # the file has no `name`: it is the file stem, and a saved copy leaves it
+    # out too (so that it is titled by its own file name)
+    name_from_file: bool = field(default=False, compare=False)
 
     def material_of(self, obj: SceneObject) -> Material:
         return self.materials[obj.material]
@@ -533,7 +537,7 @@ def scene_from_dict(data: dict, source: str = "<scene>", base_dir: Path | None =
     ctx = _Ctx(source)
     _check_keys(ctx, "", data, _TOP_KEYS)
     name = _str(ctx, "name", data["name"]) if "name" in data else default_name
-    scene = Scene(name=name)
+    scene = Scene(name=name, name_from_file="name" not in data)
     if "camera" in data:
         scene.camera = _camera(ctx, _table(ctx, "camera", data["camera"]))
     if "render" in data:
@@ -687,9 +691,53 @@ def default_scene() -> Scene:
 # --------------------------------------------------------------------------- saving
 
 
-def scene_to_dict(scene: Scene) -> dict:
-    """The TOML document for a scene; loading it gives back an equal scene."""
-    d: dict[str, Any] = {"name": scene.name, "ambient": list(scene.ambient)}
+def _sky_image_for(sky: Sky, scene_path: Path | None, dest: Path | None) -> str:
+    """``sky.image`` as the file ``dest`` must write it to name the same
+    picture: an absolute path as it is; a relative one rebased from the folder
+    it was relative to onto dest's folder (the one load_scene(dest) resolves
+    it against).  Without dest (or where it cannot be relative): absolute."""
+    image = sky.image
+    rel = Path(image)
+    if rel.is_absolute():
+        return image
+    if sky.image_path is not None:
+        # image_path is base / image, part by part (see _sky)
+        parts = Path(sky.image_path).parts
+        n = len(rel.parts)
+        if n and tuple(parts[len(parts) - n:]) == rel.parts:
+            src = Path(*parts[:len(parts) - n])
+        else:
+            return str(sky.image_path)
+        absolute = str(sky.image_path)
+    elif scene_path is not None:
+        src = Path(scene_path).parent.resolve()
+        absolute = str(src / rel)
+    else:
+        return image                       # nothing known to rebase it from
+    if dest is None:
+        return absolute
+    dest = Path(dest)
+    folder = dest.parent.resolve()
+    # saved through a link in another folder: the target is read by other
+    # names too; an absolute path holds for all of them
+    if folder != Path(os.path.realpath(dest)).parent:
+        return absolute
+    try:
+        up = os.path.relpath(src, folder)
+    except ValueError:                     # another drive (Windows)
+        return absolute
+    return image if up == "." else str(Path(up) / image)
+
+
+def scene_to_dict(scene: Scene, dest: Path | None = None) -> dict:
+    """The TOML document for a scene; loading it gives back an equal scene.
+    ``dest``: the file it is written to (save_scene).  A relative sky image is
+    then written relative to dest's folder (it names the same picture), and a
+    name that was the file stem (no `name` in the file) is left out, so that
+    the saved file is named by its own stem, as its source was."""
+    d: dict[str, Any] = {"ambient": list(scene.ambient)}
+    if dest is None or not scene.name_from_file:
+        d = {"name": scene.name, **d}
     c = scene.camera
     d["camera"] = {"position": list(c.position), "target": list(c.target), "fov": c.fov}
     r = scene.render
@@ -699,7 +747,7 @@ def scene_to_dict(scene: Scene) -> dict:
     sky: dict[str, Any] = {"type": s.type, "color": list(s.color), "horizon": list(s.horizon),
                            "zenith": list(s.zenith)}
     if s.image is not None:
-        sky["image"] = str(s.image_path) if s.image_path is not None else s.image
+        sky["image"] = _sky_image_for(s, scene.path, dest)
     d["sky"] = sky
     lights = []
     for lt in scene.lights:
@@ -749,10 +797,10 @@ def scene_to_dict(scene: Scene) -> dict:
     return d
 
 
-def scene_to_toml(scene: Scene) -> str:
+def scene_to_toml(scene: Scene, dest: Path | None = None) -> str:
     import tomli_w
 
-    return tomli_w.dumps(scene_to_dict(scene))
+    return tomli_w.dumps(scene_to_dict(scene, dest))
 
 
 def write_atomic(path: Path, data: bytes) -> None:
@@ -763,6 +811,10 @@ def write_atomic(path: Path, data: bytes) -> None:
     path = Path(path)
     if path.is_symlink():
         path = Path(os.path.realpath(path))
+    # a rename replaces a file whatever its own mode: one the user made
+    # read-only is refused, as a plain open() for writing refuses it
+    if path.exists() and not path.is_dir() and not os.access(path, os.W_OK):
+        raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), str(path))
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent or ".")
     try:
         # mkstemp makes the file 0600; give it the mode a plain open() would
@@ -773,8 +825,12 @@ def write_atomic(path: Path, data: bytes) -> None:
             umask = os.umask(0)
             os.umask(umask)
             mode = 0o666 & ~umask
-        os.chmod(tmp, mode)
-        with os.fdopen(fd, "wb") as f:
+        f = os.fdopen(fd, "wb")           # (closes fd whatever happens next)
+        try:
+            os.chmod(tmp, mode)
+        except OSError:
+            pass  # a file system without modes (FAT, some network mounts): the file is still written
+        with f:
             f.write(data)
             f.flush()
             os.fsync(f.fileno())
@@ -788,7 +844,7 @@ def write_atomic(path: Path, data: bytes) -> None:
 
 
 def save_scene(scene: Scene, path: Path) -> None:
-    write_atomic(Path(path), scene_to_toml(scene).encode("utf-8"))
+    write_atomic(Path(path), scene_to_toml(scene, Path(path)).encode("utf-8"))
 
 
 def with_overrides(scene: Scene, **kw) -> Scene:
