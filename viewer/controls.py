@@ -247,7 +247,11 @@ class Controls:
             self.changed = True
 
     def reset(self) -> None:
-        """Camera and lights back to the values the viewer started with."""
+        """Camera and lights back to the values the viewer started with
+        (nothing to do, and no change, when they are there already: the
+        samples accumulated for the view are kept)."""
+        if self.scene.camera == self._start_camera and self.scene.lights == self._start_lights:
+            return
         self.scene.camera = replace(self._start_camera)
         self.scene.lights = copy.deepcopy(self._start_lights)
         self.camera = OrbitCamera.look_at(self._start_camera.position, self._start_camera.target,
