@@ -125,6 +125,27 @@ def test_save_scene_writes_toml_that_loads_to_the_same_scene(tmp_path):
     assert Panel(load_scene(tmp_path / "saved.toml")).save_path == str(tmp_path / "saved.toml")
 
 
+def test_save_while_max_error_is_on_writes_the_users_render_settings(tmp_path):
+    """The "max error" pick replaces samples, max depth and min weight with
+    values measured for this machine and window; a saved scene keeps the
+    user's own (restored when the box is switched off), not the pick."""
+    from viewer.ui import Panel
+
+    scene = load_scene("default")
+    user = (scene.render.samples, scene.render.max_depth, scene.render.min_weight)
+    panel = Panel(scene)
+    panel.user_render = user                                   # as the app sets it with the pick
+    scene.render.samples, scene.render.max_depth, scene.render.min_weight = 3, 12, 1e-4
+    panel.save_path = str(tmp_path / "picked.toml")
+    assert panel.save(scene)
+    back = load_scene(tmp_path / "picked.toml")
+    assert (back.render.samples, back.render.max_depth, back.render.min_weight) == user
+    assert (scene.render.samples, scene.render.max_depth) == (3, 12)   # the window keeps the pick
+    panel.user_render = None                                   # max error off: what is shown is the user's
+    assert panel.save(scene)
+    assert load_scene(tmp_path / "picked.toml").render.max_depth == 12
+
+
 def test_save_failure_is_reported_not_raised(tmp_path):
     from viewer.ui import Panel
 

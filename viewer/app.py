@@ -715,7 +715,7 @@ class Viewer:
         switched_on = self.quality_saved is None
         if switched_on:
             r = self.scene.render
-            self.quality_saved = (r.samples, r.max_depth, r.min_weight)
+            self.quality_saved = self.panel.user_render = (r.samples, r.max_depth, r.min_weight)
         elif self.quality_job is not None and not remeasure:
             return  # measuring: the pick uses the new budget when it is done
         elif self.quality_parts is not None and not remeasure:
@@ -782,6 +782,8 @@ class Viewer:
             r = self.scene.render
             r.samples, r.max_depth, r.min_weight = self.quality_saved
             self.quality_saved = None
+            if self.panel is not None:
+                self.panel.user_render = None
             self.controls.changed = True
         self.quality_status = ""
         if message:

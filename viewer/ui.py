@@ -11,6 +11,7 @@ scene" writes a file that loads back to it).
 
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -67,6 +68,10 @@ class Panel:
         self.max_error_on = False  # "max error": render settings picked by viewer.quality
         self.max_error = 0.02
         self.quality_status = ""  # "measuring ...", the pick, set by the app
+        # the user's (samples, max_depth, min_weight) while "max error" has
+        # replaced them with its pick (set by the app): "Save scene" writes
+        # these, not a pick measured for this machine and window
+        self.user_render: tuple[int, int, float] | None = None
         self.adaptive = True  # adaptive accumulation (the app keeps it in step with Progressive)
         self._drawn_size: tuple[float, float] | None = None  # the window size it was last drawn for
         self.rect = (0.0, 0.0, 0.0, 0.0)  # the panel's window: x0, y0, x1, y1
@@ -335,6 +340,10 @@ class Panel:
 
     def save(self, scene: Scene) -> bool:
         path = Path(self.save_path.strip() or "scene.toml")
+        if self.user_render is not None:
+            scene = copy.deepcopy(scene)
+            r = scene.render
+            r.samples, r.max_depth, r.min_weight = self.user_render
         try:
             save_scene(scene, path)
         except (OSError, ValueError) as e:
