@@ -35,8 +35,13 @@ converged float64 reference image:
   (seed 1, while the timed renders use seed 0, so no setting shares the
   reference's sample positions beyond the always-centred first one), max
   depth 16 and min weight 1e-4 (deeper than any setting swept; going to depth
-  32 / 1e-6 changes the default scene's reference by 4e-4 RMSE, well under
-  the reference's own sampling noise of about 3e-3 at 128 samples).  With
+  32 / 1e-6 changes the default scene's reference by 4e-4 RMSE, under
+  the reference's own sampling noise: about 1.2e-3 at 128 samples and
+  320x180 on the default scene, glass-sphere and bench-opaque, measured as
+  the RMSE between references of seeds 1 and 2 over sqrt(2); a reported
+  RMSE e is about sqrt(e_true^2 + 1.2e-3^2), so the smallest ones, about
+  1.4e-3 on bench-opaque and glass-sphere, are mostly the reference's
+  noise).  With
   ``--reference-refine N`` the pixels whose samples disagree (edges, a
   checker finer than the pixel) take N samples instead
   (``viewer.reference.render_reference_refined``; the peer comparison's
@@ -238,21 +243,24 @@ def image_errors(image, reference) -> dict[str, float]:
 def upscale(image: np.ndarray, width: int, height: int) -> np.ndarray:
     """Bilinear resize of an (h, w, 3) image to (height, width, 3), pixel
     centres aligned (edge pixels clamped): how a reduced-resolution render is
-    shown full size."""
+    shown full size.  Aligned by screen position: the camera's vertical field
+    of view is fixed and the horizontal one follows the aspect, so where
+    rounding gave the small image another aspect (48x27 at scale 0.5:
+    24x14) it spans a different width of the scene, not the whole frame."""
     img = np.asarray(image, dtype=np.float64)
     h, w = img.shape[:2]
     if (h, w) == (height, width):
         return img.copy()
 
-    def coords(n_out: int, n_in: int):
-        x = (np.arange(n_out) + 0.5) * (n_in / n_out) - 0.5
+    def coords(n_out: int, n_in: int, stretch: float = 1.0):
+        x = ((np.arange(n_out) + 0.5) / n_out - 0.5) * stretch * n_in + 0.5 * n_in - 0.5
         x = np.clip(x, 0.0, n_in - 1)
         i0 = np.floor(x).astype(np.int64)
         i1 = np.minimum(i0 + 1, n_in - 1)
         return i0, i1, x - i0
 
     y0, y1, fy = coords(height, h)
-    x0, x1, fx = coords(width, w)
+    x0, x1, fx = coords(width, w, (width / height) / (w / h))
     fx = fx[None, :, None]
     top = img[y0][:, x0] * (1 - fx) + img[y0][:, x1] * fx
     bot = img[y1][:, x0] * (1 - fx) + img[y1][:, x1] * fx
@@ -475,13 +483,18 @@ class _Renderers:
         self._by_variant: dict[tuple, object] = {}
         self._current: dict[tuple, object] = {}
 
-    def get(self, scene, setting: Setting):
+    def get(self, scene, setting: Setting, size: tuple[int, int] | None = None):
         from .renderer import Renderer
         from .scene import with_overrides
 
         s = with_overrides(scene, samples=setting.samples, max_depth=setting.max_depth,
                            min_weight=setting.min_weight)
-        variant = (setting.specialise, setting.fresnel)
+        # One Renderer per image size too: a Renderer keeps its offscreen
+        # target and footprint mask for the size it drew last, so a shared
+        # one re-made them inside the timed render of every setting drawn
+        # after one of another size (the resolution scales, preset:preview,
+        # "point samples"; preview at 320x180: 14.1 ms CPU against 11.9).
+        variant = (setting.specialise, setting.fresnel, size)
         r = self._by_variant.get(variant)
         if r is None:
             r = Renderer(self.ctx, s, specialise=setting.specialise, fresnel=setting.fresnel)
@@ -560,7 +573,7 @@ def bench_scene(ctx, scene, stem: str, settings: list[Setting], width: int, heig
     try:
         for st in settings:
             w, h = render_size(st, width, height)
-            r = pool.get(scene, st)
+            r = pool.get(scene, st, (w, h))
             img, mean_spp = warm_up(r, lambda: _render_setting(r, st, w, h))
             if (w, h) != (width, height):
                 img = upscale(img, width, height)
@@ -571,7 +584,7 @@ def bench_scene(ctx, scene, stem: str, settings: list[Setting], width: int, heig
             order = results if k % 2 == 0 else results[::-1]
             for res in order:
                 st = res.setting
-                r = pool.get(scene, st)
+                r = pool.get(scene, st, (res.width, res.height))
                 built = r.programs_built
                 wall, cpu = _timed_render(r, st, res.width, res.height)
                 res.built_in_timed += r.programs_built - built
