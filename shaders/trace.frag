@@ -20,6 +20,15 @@ uniform vec3 camUp;            // up * tan(fov/2)
 
 out vec4 fragColor;
 
+// floor(w / size) of the checker rule, per component.  A negative w has a
+// negative quotient, so a cell of -1 or less; a quotient below float32's
+// smallest normal (a square 1e38 or more across, |w| ~ 1) flushes to -0 and
+// its floor to 0, which put the whole of x < 0 on the wrong side.
+vec2 checkerCell(vec2 w, float size) {
+    vec2 c = floor(w / size);
+    return vec2(w.x < 0.0 ? min(c.x, -1.0) : c.x, w.y < 0.0 ? min(c.y, -1.0) : c.y);
+}
+
 #ifdef FOOTPRINT_AA
 // Footprint samples: in adaptive renders, and in uniform renders of more
 // than one sample (viewer/renderer.py).  FOOTPRINT_SHARE_PASS: no tracing,
@@ -364,7 +373,8 @@ Surface surfaceAt(Material m, vec3 p) {
         float size = m.dielectric.w;
         vec2 w = p.xz + m.checkerOffset.xy;
         w += params.y * max(max(abs(p.x), max(abs(p.y), abs(p.z))), max(abs(w.x), abs(w.y)));
-        if (mod(floor(w.x / size) + floor(w.y / size), 2.0) > 0.5) {
+        vec2 cell = checkerCell(w, size);
+        if (mod(cell.x + cell.y, 2.0) > 0.5) {
             s.color = m.checkerColor.rgb;
             s.emission = m.checkerEmission.rgb;
         }
@@ -401,7 +411,22 @@ vec3 lightAt(Material m, vec3 p, vec3 n, vec3 v, uint mask) {
             if (term <= 0.0) continue;
             // Leave the surface along its normal: at a grazing light a start
             // offset along l alone would not clear the hit point's error.
-            vec3 vis = shadowTransmittance(p + surfaceEps(p) * n, l, dist, mask);
+            // It aims at a point light from where it starts and ends short
+            // of it by the light's own offset: a light on a surface (a lamp
+            // on the floor, or 1e-300 above it) is not shadowed by that
+            // surface, as a ray leaving a surface does not meet it again
+            // (it was salt and pepper, and along l from the offset start the
+            // ray passed under the light and met the floor first).
+            vec3 o = p + surfaceEps(p) * n;
+            vec3 ls = l;
+            float reach = INF;
+            if (light.vector.w <= 0.5) {
+                vec3 to = light.vector.xyz - o;
+                reach = length(to);
+                ls = to / reach;
+                reach -= surfaceEps(light.vector.xyz);
+            }
+            vec3 vis = shadowTransmittance(o, ls, reach, mask);
             if (maxComponent(vis) <= 0.0) continue;
             lit += light.radiance.rgb * vis * term;
         }

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import copy
 import math
+import sys
 from dataclasses import dataclass
 
 import numpy as np
@@ -103,11 +104,25 @@ def camera_distance_exponent(scene: Scene) -> int:
     return math.frexp(s)[1] + math.frexp(hyp)[1] - 1
 
 
+def view_length_exponent(scene: Scene) -> int:
+    """The exponent of the scene's unit length for the GPU: that of the
+    camera's distance to its target (camera_distance_exponent), but never
+    below 2^-20 of the bounded objects' extent.  The image depends on the
+    view direction only, so a camera 5e-324 from its target in a scene of
+    size 1 is an ordinary view; its distance alone would have scaled the
+    scene by 2^1075, past float64 (OverflowError)."""
+    e = camera_distance_exponent(scene)
+    ext = _extent(scene)
+    if 0 < ext < math.inf:
+        e = max(e, math.frexp(ext)[1] - 20)
+    return e
+
+
 def gpu_length_exponent(scene: Scene) -> int:
     """k such that the GPU gets the scene's lengths times 2^k: 0 when the
-    camera's distance to its target lies in GPU_DISTANCE_RANGE, else the k
-    that brings it to [1, 2)."""
-    e = camera_distance_exponent(scene)
+    scene's unit length (view_length_exponent) lies in GPU_DISTANCE_RANGE,
+    else the k that brings it to [1, 2)."""
+    e = view_length_exponent(scene)
     lo, hi = (math.frexp(v)[1] for v in GPU_DISTANCE_RANGE)
     return 0 if lo <= e <= hi else 1 - e
 
@@ -119,7 +134,7 @@ def scaled_scene(scene: Scene, k: int) -> Scene:
         return scene
 
     def vec(v):
-        return tuple(math.ldexp(float(c), k) for c in v)
+        return tuple(_ldexp(float(c), k) for c in v)
 
     out = copy.deepcopy(scene)
     out.camera.position, out.camera.target = vec(out.camera.position), vec(out.camera.target)
@@ -127,15 +142,24 @@ def scaled_scene(scene: Scene, k: int) -> Scene:
         if lt.position is not None:
             lt.position = vec(lt.position)
     for m in out.materials.values():
-        m.absorption = tuple(math.ldexp(float(c), -k) for c in m.absorption)
+        m.absorption = tuple(_ldexp(float(c), -k) for c in m.absorption)
         if m.checker is not None:
-            m.checker.size = math.ldexp(m.checker.size, k)
+            m.checker.size = _ldexp(m.checker.size, k)
     for o in out.objects:
-        o.height, o.radius = math.ldexp(o.height, k), math.ldexp(o.radius, k)
+        o.height, o.radius = _ldexp(o.height, k), _ldexp(o.radius, k)
         o.center, o.min, o.max, o.base = vec(o.center), vec(o.min), vec(o.max), vec(o.base)
         if o.wall is not None:
-            o.wall = math.ldexp(o.wall, k)
+            o.wall = _ldexp(o.wall, k)
     return out
+
+
+def _ldexp(x: float, k: int) -> float:
+    """x * 2^k, at +-float64's largest where that overflows (a far light or
+    plane the scaling takes past it: reached_scene brings it back)."""
+    try:
+        return math.ldexp(x, k)
+    except OverflowError:
+        return math.copysign(sys.float_info.max, x)
 
 
 # Lengths squared must stay below float32's 3.4e38 in the shader, and the
@@ -157,7 +181,7 @@ def reached_scene(scene: Scene, reach: float = GPU_REACH) -> Scene:
     """`scene` with its far point lights and planes brought within `reach`
     camera distances of the eye (see GPU_REACH); the same scene when nothing
     is that far, as in any ordinary scene."""
-    reach = math.ldexp(reach, camera_distance_exponent(scene))
+    reach = math.ldexp(reach, view_length_exponent(scene))
     eye = np.array(scene.camera.position, dtype=np.float64)
     out = None
 
@@ -188,6 +212,81 @@ def gpu_frame_scene(scene: Scene) -> tuple[Scene, int]:
     return reached_scene(scaled_scene(scene, k)), k
 
 
+# ---------------------------------------------------------------- radiance for the GPU
+#
+# The image is linear in the scene's sources of light (emission, ambient,
+# light colour * intensity, sky), and the exposure scales it once more.  In
+# float32 a source beyond 3.4e38 (an intensity of 1e39) saturated, and every
+# pixel it lit came out a third of its value; an exposure of 1e-300 on a
+# light of intensity 1e300 gave 0 (and inf) for a pixel of 0.9.  So the
+# sources are uploaded times 2^r (exact) and the exposure times 2^-r, with
+# r = the exposure's exponent: the shader then computes in the units of
+# the output, where an intermediate overflows or underflows only with the
+# pixel itself.  Where the brightest source would come out above
+# 2^RADIANCE_TOP, up to 2^EXPOSURE_TOP of the exposure stays in the final
+# product, so that a source beyond float32 (saturated) still makes inf and
+# the ordinary ones keep their values.  An ordinary scene has r = 0 (bit for
+# bit the same).
+RADIANCE_TOP = 100
+EXPOSURE_TOP = 100
+
+
+def _top_exponent(values) -> int | None:
+    """frexp's exponent of the largest of `values` (>= 0); None if all are 0."""
+    top = max(values, default=0.0)
+    return math.frexp(top)[1] if top > 0 else None
+
+
+def radiance_exponent(scene: Scene) -> int:
+    """r of the sources' 2^r on the GPU (the exposure's 2^-r)."""
+    sources = [c for m in scene.materials.values()
+               for c in (*m.emission, *(m.checker.emission if m.checker and m.checker.emission else ()))]
+    sources += [*scene.ambient, *scene.sky.color, *scene.sky.horizon, *scene.sky.zenith]
+    e_max = max([_top_exponent(sources) or 0]
+                + [_top_exponent(lt.color) + math.frexp(lt.intensity)[1] for lt in scene.lights
+                   if lt.intensity > 0 and _top_exponent(lt.color) is not None])
+    # a surface sends back up to C * k times the light it gets (a colour of
+    # 1e39 lit by a light of 1: 8e38 leaves it, a tenth of it through glass)
+    gains = [(_top_exponent((*m.color, *(m.checker.color if m.checker else ()))),
+              _top_exponent((m.ambient, m.diffuse, m.specular))) for m in scene.materials.values()]
+    e_max += max([0] + [c + k for c, k in gains if c is not None and k is not None])
+    x = math.frexp(scene.render.exposure)[1]
+    out = e_max + x                     # the brightest radiance's exponent in the output
+    if -60 <= e_max <= 60 and -60 <= x <= 60 and out <= 60:
+        return 0                        # ordinary: nothing near float32's limits
+    return x - min(max(out - RADIANCE_TOP, 0), EXPOSURE_TOP)
+
+
+def _radiance(values, r: int, factor: float = 1.0) -> tuple[float, ...]:
+    """values * factor * 2^r in float64, without overflow in between (at
+    +-float64's largest where the result itself is beyond it)."""
+    out = []
+    for v in values:
+        if v == 0 or factor == 0:
+            out.append(0.0)
+            continue
+        (mv, ev), (mf, ef) = math.frexp(v), math.frexp(factor)
+        out.append(_ldexp(mv * mf, ev + ef + r))
+    return tuple(out)
+
+
+def colour_balance(m) -> int:
+    """a of a material's colours uploaded times 2^-a and its ambient,
+    diffuse and specular times 2^a: the shader only uses their products
+    (C * k), so a colour of 1e39 (about 1 on the GPU, the k times 2^130)
+    or a diffuse of 1e39 keeps its pixels of 8e37 instead of saturating
+    to a third of them.  The colour to about 1 where the largest k stays
+    within 2^100 and the smallest colour channel above 2^-100; 0 (bit for
+    bit the same) for any ordinary material."""
+    colours = (*m.color, *(m.checker.color if m.checker else ()))
+    ec = _top_exponent(colours)
+    ek = _top_exponent((m.ambient, m.diffuse, m.specular))
+    if ec is None or ek is None or (-60 <= ec <= 60 and -60 <= ek <= 60):
+        return 0
+    ec_min = math.frexp(min(c for c in colours if c > 0))[1]
+    return min(ec, 100 - ek, ec_min + 100)
+
+
 def _saturate(a: np.ndarray) -> np.ndarray:
     """Float fields that overflowed float32 (validation admits only finite
     numbers, so an inf here is a value beyond 3.4e38) at +-F32_MAX instead:
@@ -201,6 +300,12 @@ def _saturate(a: np.ndarray) -> np.ndarray:
 
 def scene_scale(scene: Scene) -> float:
     """A length for the scene: bounded objects' extent and the camera distance."""
+    return max(_extent(scene), 1e-30)
+
+
+def _extent(scene: Scene) -> float:
+    """The largest extent along x, y or z of the eye, the target and the
+    bounded objects (inf where it overflows)."""
     eye = np.array(scene.camera.position)
     pts = [eye, np.array(scene.camera.target)]
     for o in scene.objects:
@@ -212,7 +317,7 @@ def scene_scale(scene: Scene) -> float:
             pts += [np.array(o.base) - o.radius, np.array(o.base) + o.radius + o.height]
     pts = np.array(pts)
     with np.errstate(over="ignore"):        # a box 1e308 across: inf (not drawn faithfully anyway)
-        return float(max(np.max(pts.max(axis=0) - pts.min(axis=0)), 1e-30))
+        return float(np.max(pts.max(axis=0) - pts.min(axis=0)))
 
 
 def bounding_sphere(obj: SceneObject, eye: np.ndarray) -> tuple[float, float, float, float]:
@@ -367,18 +472,21 @@ def _pack_scene(scene: Scene, specialise: bool, fresnel: str) -> PackedScene:
                 initial_mask |= 1 << slot
             slot += 1
 
+    rad = radiance_exponent(scene)
     mats = np.zeros(max(1, len(scene.materials)), MATERIAL_DTYPE)
     for i, m in enumerate(scene.materials.values()):
         rec = mats[i]
-        rec["colorAmbient"] = (*m.color, m.ambient)
-        rec["phong"] = (m.diffuse, m.specular, m.shininess, m.reflectivity)
+        a = colour_balance(m)
+        rec["colorAmbient"] = (*_radiance(m.color, -a), _ldexp(m.ambient, a))
+        rec["phong"] = (_ldexp(m.diffuse, a), _ldexp(m.specular, a), m.shininess, m.reflectivity)
         rec["absorption"][:3] = m.absorption
-        rec["emission"][:3] = m.emission
+        rec["emission"][:3] = _radiance(m.emission, rad)
         if m.checker is not None:
             s = m.checker.size
             rec["dielectric"] = (m.transparency, m.ior, 1.0, s)
-            rec["checkerColor"][:3] = m.checker.color
-            rec["checkerEmission"][:3] = m.checker.emission if m.checker.emission is not None else m.emission
+            rec["checkerColor"][:3] = _radiance(m.checker.color, -a)
+            rec["checkerEmission"][:3] = _radiance(m.checker.emission if m.checker.emission is not None
+                                                   else m.emission, rad)
             rec["checkerOffset"][:2] = (math.fmod(eye[0], 2 * s), math.fmod(eye[2], 2 * s))
         else:
             rec["dielectric"] = (m.transparency, m.ior, 0.0, 1.0)
@@ -389,15 +497,15 @@ def _pack_scene(scene: Scene, specialise: bool, fresnel: str) -> PackedScene:
             lights[j]["vector"] = (*(np.array(lt.position) - eye), 0.0)
         else:
             lights[j]["vector"] = (*unit_vector(lt.direction), 1.0)
-        lights[j]["radiance"][:3] = np.array(lt.color) * lt.intensity
+        lights[j]["radiance"][:3] = _radiance(lt.color, rad, lt.intensity)
 
     tail = np.zeros(1, TAIL_DTYPE)
-    tail["ambient"][0, :3] = scene.ambient
-    tail["skyColor"][0, :3] = scene.sky.color
-    tail["skyHorizon"][0, :3] = scene.sky.horizon
-    tail["skyZenith"][0, :3] = scene.sky.zenith
+    tail["ambient"][0, :3] = _radiance(scene.ambient, rad)
+    tail["skyColor"][0, :3] = _radiance(scene.sky.color, rad)
+    tail["skyHorizon"][0, :3] = _radiance(scene.sky.horizon, rad)
+    tail["skyZenith"][0, :3] = _radiance(scene.sky.zenith, rad)
     r = scene.render
-    tail["params"][0] = (EPS_SCENE * scene_scale(scene), EPS_REL, r.min_weight, r.exposure)
+    tail["params"][0] = (EPS_SCENE * scene_scale(scene), EPS_REL, r.min_weight, _ldexp(r.exposure, -rad))
     # the mask travels as the bits of a signed int (uint(...) in GLSL restores them)
     tail["iparams"][0] = (r.max_depth, np.int32(np.uint32(initial_mask).view(np.int32)),
                           SKY_TYPES[scene.sky.type], 0)

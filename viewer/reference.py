@@ -48,7 +48,7 @@ from pathlib import Path
 import numpy as np
 
 from .sampling import sample_offsets
-from .scene import Scene, SceneObject
+from .scene import Scene, SceneObject, unit_vector
 
 __all__ = [
     "render_reference", "render_reference_refined", "camera_rays", "pixel_rays", "trace", "first_hit",
@@ -539,9 +539,8 @@ class _Ctx:
         size = max([1e-300, float(np.linalg.norm(scene.camera.position)),
                     float(np.linalg.norm(scene.camera.target))]
                    + [p.extent() for p in self.prims])
-        for lt in scene.lights:
-            if lt.type == "point":
-                size = max(size, float(np.linalg.norm(lt.position)))
+        # (not the point lights: a light 1e20 away, a sun, made every offset
+        # 1e14 and the rays passed through the whole scene)
         self.size = size
         self.ambient = np.array(scene.ambient, dtype=np.float64)
         self.max_depth = scene.render.max_depth
@@ -714,27 +713,41 @@ class _Ctx:
             return local
         v = -D
         for lt in self.scene.lights:
-            Lc = np.array(lt.color, dtype=np.float64) * lt.intensity
+            with np.errstate(over="ignore"):        # beyond float64: inf (lit pixels are)
+                Lc = np.array(lt.color, dtype=np.float64) * lt.intensity
             if not (Lc > 0).any():
                 continue
             if lt.type == "point":
-                to = np.array(lt.position, dtype=np.float64) - P
-                dist = np.linalg.norm(to, axis=1)
-                with np.errstate(invalid="ignore", divide="ignore"):
-                    l = to / dist[:, None]
+                # scaled by the largest component first, so that a light
+                # 1e300 away neither overflows the length nor loses l
+                half = np.array(lt.position, dtype=np.float64) / 2 - P / 2
+                big = np.abs(half).max(axis=1, keepdims=True)
+                with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+                    u = half / big
+                    n = np.linalg.norm(u, axis=1)
+                    l = u / n[:, None]
+                    dist = 2.0 * big[:, 0] * n
             else:
-                dvec = np.array(lt.direction, dtype=np.float64)
-                l = np.broadcast_to(-dvec / np.linalg.norm(dvec), P.shape)
+                l = np.broadcast_to(-np.array(unit_vector(lt.direction)), P.shape)
                 dist = np.full(len(P), _INF)
             ndl = _dot(n_f, l)
             m = lit & (ndl > 0.0)
             if not m.any():
                 continue
-            Vj = self.shadow(P[m], np.ascontiguousarray(l[m]), dist[m])
+            reach = dist[m]
+            if lt.type == "point":
+                # short of the light by its own offset (as a ray leaving a
+                # surface): a light on a surface is not shadowed by it
+                reach = reach - (EPS_REL * self.size + EPS_REL * float(np.max(np.abs(lt.position))))
+            Vj = self.shadow(P[m], np.ascontiguousarray(l[m]), reach)
             r = 2.0 * ndl[m][:, None] * n_f[m] - l[m]
             rv = np.maximum(_dot(r, v[m]), 0.0)
             term = kd[m] * ndl[m] + ks[m] * rv ** p[m]
-            local[m] += C[m] * Lc * Vj * term[:, None]
+            # a light whose colour * intensity overflows (1e200 * 1e200) is
+            # inf: in shadow (V = 0) it adds 0, not inf * 0 = NaN
+            with np.errstate(invalid="ignore", over="ignore"):
+                add = C[m] * Lc * Vj * term[:, None]
+            local[m] += np.where((Vj > 0) & (term[:, None] > 0) & (C[m] > 0), add, 0.0)
         return local
 
     # -- the ray tree
@@ -804,7 +817,10 @@ class _Ctx:
 def _camera_basis(scene: Scene):
     cam = scene.camera
     pos = np.array(cam.position, dtype=np.float64)
-    f = _normalize(np.array(cam.target, dtype=np.float64) - pos)
+    # scaled first: target - position may overflow (1e308 and -1e308) or its
+    # square underflow (points 1e-300 apart)
+    s = max(abs(c) for c in (*cam.target, *cam.position))
+    f = np.array(unit_vector([t / s - p / s for t, p in zip(cam.target, cam.position)]))
     right = _normalize(np.cross(f, np.array([0.0, 1.0, 0.0])))
     up = np.cross(right, f)
     return pos, f, right, up, math.tan(math.radians(cam.fov) / 2.0)

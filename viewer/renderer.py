@@ -15,7 +15,7 @@ from typing import Callable
 import moderngl
 import numpy as np
 
-from .gpu_scene import F32_MAX, camera_uniforms, gpu_frame_scene, pack_scene
+from .gpu_scene import F32_MAX, camera_uniforms, gpu_frame_scene, pack_scene, radiance_exponent
 from . import interrupt
 from .imageio import SkyImageError, read_sky_image
 from .sampling import sample_offsets
@@ -126,7 +126,9 @@ class Renderer:
 
     def _update_sky(self, scene: Scene) -> None:
         path = scene.sky.image_path if scene.sky.type == "image" else None
-        if path == self._sky_path and self._sky is not None:
+        # the picture is a source of light: times the sources' 2^r (gpu_scene.radiance_exponent)
+        key = None if path is None else (path, radiance_exponent(scene))
+        if key == self._sky_path and self._sky is not None:
             return
         if path is not None:
             img = read_sky_image(path)
@@ -135,6 +137,9 @@ class Renderer:
             if max(w, h) > limit:        # the driver would make an empty texture: a black sky
                 raise SkyImageError(f"sky.image: {path} is {w}x{h}, larger than the {limit}x{limit} texture "
                                     "this OpenGL driver can hold; scale the picture down")
+            if key[1]:
+                with np.errstate(over="ignore"):
+                    img = np.clip(np.ldexp(img.astype(np.float64), key[1]), 0.0, F32_MAX)
             tex = self.ctx.texture((w, h), 3, np.ascontiguousarray(img, dtype="f4").tobytes(), dtype="f4")
             tex.repeat_x, tex.repeat_y = True, False
         else:
@@ -142,7 +147,7 @@ class Renderer:
         tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
         if self._sky is not None:        # only now: a picture refused above leaves the old sky working
             self._sky.release()
-        self._sky, self._sky_path = tex, path
+        self._sky, self._sky_path = tex, key
 
     def _vao(self) -> moderngl.VertexArray:
         return self.vao_of(self.program)

@@ -167,7 +167,7 @@ vec2 planePoint(vec2 uv) {
 
 // The checker cell (x, z) of (u, v).
 vec2 cellOf(vec2 uv, vec2 off, float size) {
-    return floor((planePoint(uv) + off) / size);
+    return checkerCell(planePoint(uv) + off, size);
 }
 
 // The share of the pixel's square on the checker's second colour (where

@@ -59,7 +59,7 @@ layout(std140) uniform SceneBlock {
     vec4 skyColor;
     vec4 skyHorizon;
     vec4 skyZenith;
-    vec4 params;              // x: epsAbs, y: epsRel, z: minWeight, w: exposure
+    vec4 params;              // x: epsAbs, y: epsRel, z: minWeight, w: exposure * 2^-r
     ivec4 iparams;            // x: maxDepth, y: initial medium mask (uint bits), z: sky type, w: unused
     ivec4 counts;             // objects, lights, transparent objects, unused
 };
