@@ -527,11 +527,68 @@ void walkNode(Branch br, inout vec3 sum, out Branch reflected, out Branch refrac
 #endif
 }
 
-// The ray tree, walked depth-first with the reflected child first (the order
-// does not change the sum): a node's reflected child is walked next and its
-// refracted child waits on the stack, so a node pushes at most one branch and
-// max_depth + 1 entries are more than enough.  A scene with no glass has
+// The ray tree, walked depth-first, the heavier child first (the order does
+// not change the sum; where a driver cuts a walk short it leaves the lighter
+// branches): a node's heavier child is walked next and the other waits on
+// the stack, so a node pushes at most one branch and the stack holds
+// branches of strictly increasing depth, at most max_depth - 1 of them
+// (max_depth + 1 entries are more than enough).  A scene with no glass has
 // chains only (no stack); one with no reflection either, the camera ray only.
+//
+// RESUME (Renderer.render of deep trees): Mesa's llvmpipe ends a shader
+// invocation, silently, after 65535 loop iterations counted over all its
+// loops together (a few thousand nodes here: the rest of the tree was
+// dropped), and a GPU's watchdog ends a long draw.  So a pass traces at most
+// resumeBudget nodes and writes into resumeOut where it stopped: the path
+// from the camera ray to the next node, one bit per level (0: the child
+// walked first, 1: the other), its length, and w = 1 (0: the tree is done).
+// The next pass of the same sample traces that path again, adding nothing
+// (its light is in already), rebuilds the stack on the way and goes on.
+#ifdef RESUME
+#ifdef ADAPTIVE
+#error "RESUME is for uniform renders (its output takes location 1)"
+#endif
+uniform usampler2D resumeIn;   // the last pass's resumeOut (read where resumeFirst == 0)
+uniform int resumeFirst;       // 1: the sample's first pass, from the camera ray
+uniform int resumeBudget;      // nodes a pass traces at most
+uniform int resumeProbe;       // 2 (a loop's trip count the compiler cannot know)
+layout(location = 1) out uvec4 resumeOut;
+
+// Whether llvmpipe's loop limit has been reached in this invocation: from
+// then on every loop stops after its first iteration, so a two-iteration
+// loop runs once.  The limit counts iterations, not nodes (a node of many
+// lights or objects takes hundreds), so a pass checks after every node and
+// hands back the node that was cut, to be traced again (w = 2: Renderer
+// then gives the passes fewer nodes).
+bool loopsCut() {
+    int n = 0;
+    for (int i = 0; i < resumeProbe; ++i) ++n;
+    return n < resumeProbe;
+}
+
+// path p cut to `level` bits, then bit `level` set to `one`
+uvec2 pathAt(uvec2 p, int level, bool one) {
+    uint bit = one ? 1u : 0u;
+    if (level < 32) {
+        uint keep = level == 0 ? 0u : (0xFFFFFFFFu >> uint(32 - level));
+        return uvec2((p.x & keep) | (bit << uint(level)), 0u);
+    }
+    uint keep = level == 32 ? 0u : (0xFFFFFFFFu >> uint(64 - level));
+    return uvec2(p.x, (p.y & keep) | (bit << uint(level - 32)));
+}
+#endif
+
+#ifdef HAS_DIELECTRIC
+// The children a node's walk follows (n of them), the heavier one in a.
+int followed(Branch reflected, Branch refracted, float minWeight, out Branch a, out Branch b) {
+    bool r = worthFollowing(reflected.w, minWeight), t = worthFollowing(refracted.w, minWeight);
+    bool reflectedFirst = r && (!t || maxComponent(reflected.w) > maxComponent(refracted.w));
+    a = reflectedFirst ? reflected : refracted;
+    b = reflectedFirst ? refracted : reflected;
+    return int(r) + int(t);
+}
+#endif
+
 vec3 radiance(vec3 origin, vec3 dir) {
 #ifdef HAS_DIELECTRIC
     Branch stack[STACK_SIZE];
@@ -540,22 +597,79 @@ vec3 radiance(vec3 origin, vec3 dir) {
     float minWeight = params.z;
     vec3 sum = vec3(0.0);
     Branch br = Branch(origin, dir, vec3(1.0), 1, uint(iparams.y), 0.0);
-    for (bool walking = true; walking; ) {
-        Branch reflected, refracted;
-        walkNode(br, sum, reflected, refracted);
-        bool followR = worthFollowing(reflected.w, minWeight);
+#ifdef RESUME
+    resumeOut = uvec4(0u);
 #ifdef HAS_DIELECTRIC
-        bool followT = worthFollowing(refracted.w, minWeight);
-        if (followR && followT && sp < STACK_SIZE) stack[sp++] = refracted;
-        if (followR) br = reflected;
-        else if (followT) br = refracted;
+    uvec2 path = uvec2(0u);        // br's path
+    int budget = resumeBudget;
+    if (resumeFirst == 0) {
+        uvec4 st = texelFetch(resumeIn, ivec2(gl_FragCoord.xy), 0);
+        if (st.w == 0u) return sum;                     // done in an earlier pass
+        for (int level = 0; level < int(st.z); ++level) {
+            vec3 again = vec3(0.0);
+            Branch reflected, refracted, a, b;
+            walkNode(br, again, reflected, refracted);
+            int n = followed(reflected, refracted, minWeight, a, b);
+            bool second = ((level < 32 ? st.x >> uint(level) : st.y >> uint(level - 32)) & 1u) != 0u;
+            if (second) br = b;
+            else {
+                if (n == 2 && sp < STACK_SIZE) stack[sp++] = b;
+                br = a;
+            }
+        }
+        // the path itself was cut: the same state again, with no light
+        if (loopsCut()) {
+            resumeOut = uvec4(st.xyz, 2u);
+            return vec3(0.0);
+        }
+        path = st.xy;
+    }
+    vec3 sumBefore;
+    uvec2 pathBefore;
+    int depthBefore;
+#endif
+#endif
+    bool walking = true;
+    while (walking) {
+        Branch reflected, refracted;
+#if defined(RESUME) && defined(HAS_DIELECTRIC)
+        if (budget-- <= 0) {
+            resumeOut = uvec4(path, uint(br.depth - 1), 1u);
+            return sum;
+        }
+        sumBefore = sum;
+        pathBefore = path;
+        depthBefore = br.depth;
+#endif
+        walkNode(br, sum, reflected, refracted);
+#ifdef HAS_DIELECTRIC
+        Branch a, b;
+        int n = followed(reflected, refracted, minWeight, a, b);
+        if (n == 2 && sp < STACK_SIZE) stack[sp++] = b;
+        if (n > 0) br = a;
         else if (sp > 0) br = stack[--sp];
         else walking = false;
+#if defined(RESUME)
+        // a child one level down the first way, or a waiting branch: the
+        // other way at its own level
+        if (n > 0) path = pathAt(path, br.depth - 2, false);
+        else if (walking) path = pathAt(path, br.depth - 2, true);
+        // this node was cut short by the loop limit: its light and children
+        // are not to be trusted; the next pass traces it again
+        if (loopsCut()) {
+            resumeOut = uvec4(pathBefore, uint(depthBefore - 1), 2u);
+            return sumBefore;
+        }
+#endif
 #else
         br = reflected;
-        walking = followR;
+        walking = worthFollowing(reflected.w, minWeight);
 #endif
     }
+#if defined(RESUME) && defined(HAS_DIELECTRIC)
+    // the walk itself stopped at the limit after a whole node: go on at br
+    if (walking) resumeOut = uvec4(path, uint(br.depth - 1), 2u);
+#endif
     return sum;
 }
 

@@ -322,8 +322,8 @@ class Renderer:
             if name in prog:
                 prog[name].value = v
 
-    def tiles(self, width: int, height: int) -> list[tuple[int, int, int, int]]:
-        t = self.tile
+    def tiles(self, width: int, height: int, side: int | None = None) -> list[tuple[int, int, int, int]]:
+        t = min(self.tile, side) if side else self.tile
         return [(x, y, min(t, width - x), min(t, height - y))
                 for y in range(0, height, t) for x in range(0, width, t)]
 
@@ -338,6 +338,7 @@ class Renderer:
         return self._fbo
 
     def _release_target(self) -> None:
+        self._release_resume()          # its framebuffers hold the texture
         for obj in (self._fbo, self._fbo_tex):
             if obj is not None:
                 obj.release()
@@ -394,16 +395,29 @@ class Renderer:
         if footprint is None:
             footprint = self.takes_footprint(samples)
         fp = self.footprint_sampler(width, height) if footprint else None
+        from .adaptive import AdaptiveSampler
         if fp is not None:
-            from .adaptive import AdaptiveSampler
             groups = self.programs_for(width, height, compile_all=True, **AdaptiveSampler.FOOTPRINT_SAMPLES)
+        resume = None
+        self._resume_budget = self.RESUME_BUDGET    # halved where a pass meets the loop limit
+        if self.resumes():
+            # one program over the whole image (no culling variants: a deep
+            # tree costs far more than the objects it could skip)
+            extra = {"RESUME": 1, **(AdaptiveSampler.FOOTPRINT_SAMPLES if fp is not None else {})}
+            resume = self.variant(**extra)
         ctx = self.ctx
         fbo = self._target(width, height)
         fbo.use()
         ctx.blend_func = moderngl.ONE, moderngl.ONE
         ctx.blend_equation = moderngl.FUNC_ADD
-        tiles = self.tiles(width, height)
-        total, done = samples * len(tiles), 0
+        tiles = self.tiles(width, height) if resume is None else self.tiles(width, height, self.RESUME_TILE)
+        # progress in thousandths of a tile where a tile takes passes
+        scale = 1 if resume is None else 1000
+        total, done = samples * len(tiles) * scale, 0
+
+        def tick(part: float) -> None:
+            if progress is not None:
+                progress(done + min(int(scale * part), scale - 1), total)
         try:
             for i, off in enumerate(offsets):
                 # The first sample's tiles cover every pixel: written as they
@@ -413,7 +427,10 @@ class Renderer:
                 elif i == 1:
                     ctx.enable(moderngl.BLEND)
                 for rect in tiles:
-                    if fp is None:
+                    if resume is not None:
+                        self._draw_resumable(resume, width, height, off, rect, i > 0,
+                                             None if fp is None else fp.bind_footprint, tick)
+                    elif fp is None:
                         self.draw_sample(width, height, off, rect)
                     else:
                         self.draw_groups(groups, width, height, off, rect, fp.bind_footprint)
@@ -422,12 +439,104 @@ class Renderer:
                     # the progress bar is truthful.
                     ctx.finish()
                     interrupt.check()
-                    done += 1
+                    done += scale
                     if progress is not None:
                         progress(done, total)
         finally:
             ctx.disable(moderngl.BLEND)
         return self._read_rgb(fbo, samples)
+
+    #: Nodes of a ray tree one draw traces at most (shaders/trace.frag,
+    #: RESUME): far below what ends a shader on llvmpipe (65535 loop
+    #: iterations in all, a dozen or more per node) or a draw on a GPU's
+    #: watchdog.  A tree that may hold more (2^max_depth - 1 nodes, with
+    #: glass) is traced in passes of this many nodes, each resuming where
+    #: the last one stopped.
+    RESUME_BUDGET = 512
+    #: Tile side of resumable renders: a pass over it stays well under a
+    #: second on llvmpipe, so Ctrl-C (taken between passes) ends at once.
+    RESUME_TILE = 64
+
+    def resumes(self) -> bool:
+        """Whether render() traces the scene's ray trees in resumable passes:
+        a scene with glass whose tree may have more than RESUME_BUDGET nodes.
+        Depth d holds at most 2^(d-1) of them, and at most 1 / min_weight:
+        a node's children weigh at most what it weighs (R + (1 - R) T <= 1),
+        so the weights at one depth add up to 1 at most.  (Without glass a
+        tree is a chain of at most max_depth nodes.)"""
+        if not self._defines.get("HAS_DIELECTRIC"):
+            return False
+        r = self.scene.render
+        per_depth = 1.0 / r.min_weight if r.min_weight > 0 else float("inf")
+        return sum(min(2.0 ** (d - 1), per_depth) for d in range(1, r.max_depth + 1)) > self.RESUME_BUDGET
+
+    def _resume_targets(self, width: int, height: int) -> list[moderngl.Framebuffer]:
+        """Two framebuffers of the accumulation texture and a resume-state
+        texture each (RGBA32UI): a pass reads one's state and writes the
+        other's."""
+        key = (width, height)
+        if getattr(self, "_resume_key", None) != key:
+            self._release_resume()
+            self._resume_key = key
+            self._resume_tex = [self.ctx.texture((width, height), 4, dtype="u4") for _ in range(2)]
+            for t in self._resume_tex:
+                t.filter = (moderngl.NEAREST, moderngl.NEAREST)
+            self._resume_fbos = [self.ctx.framebuffer(color_attachments=[self._fbo_tex, t]) for t in self._resume_tex]
+        return self._resume_fbos
+
+    def _release_resume(self) -> None:
+        for obj in (*getattr(self, "_resume_fbos", ()), *getattr(self, "_resume_tex", ())):
+            obj.release()
+        self._resume_fbos, self._resume_tex, self._resume_key = [], [], None
+
+    def _draw_resumable(self, prog: moderngl.Program, width: int, height: int, offset, rect,
+                        add: bool, bind: Callable[[moderngl.Program], None] | None,
+                        tick: Callable[[float], None] | None = None) -> None:
+        """One sample of the tile `rect` with the RESUME program: passes of
+        at most RESUME_BUDGET nodes per pixel until every pixel's tree is
+        done, each pass adding its light (additive blending; the sample's
+        first pass writes where `add` is false), Ctrl-C taken between them."""
+        fbos = self._resume_targets(width, height)
+        unit = 7                 # the sky is on unit 0, the footprint mask on its own
+        w, h = rect[2], rect[3]
+        k, last = 0, None
+        while True:
+            src, dst = self._resume_tex[(k + 1) % 2], fbos[k % 2]
+            dst.use()
+            if k == 1 and not add:
+                self.ctx.enable(moderngl.BLEND)
+
+            def bind_all(p, k=k, src=src):
+                if bind is not None:
+                    bind(p)
+                src.use(location=unit)
+                for name, v in (("resumeIn", unit), ("resumeFirst", int(k == 0)),
+                                ("resumeBudget", self._resume_budget), ("resumeProbe", 2)):
+                    if name in p:
+                        p[name].value = v
+
+            self.draw_groups([(prog, ((0, 0, width, height),))], width, height, offset, rect, bind_all)
+            self.ctx.finish()
+            interrupt.check()
+            state = np.frombuffer(dst.read(viewport=rect, components=4, attachment=1, dtype="u4"), np.uint32)
+            flags = state.reshape(h * w, 4)[:, 3]
+            left = np.count_nonzero(flags)
+            if not left:
+                break
+            if (flags == 2).any():
+                # the pass reached the driver's loop limit (the shader hands
+                # the cut nodes back): fewer nodes a pass from now on
+                if self._resume_budget == 1 and last is not None and np.array_equal(state, last):
+                    raise RuntimeError("a node of this scene's ray tree takes more loop iterations than "
+                                       "this OpenGL driver runs in one shader invocation")
+                self._resume_budget = max(1, self._resume_budget // 2)
+            last = state
+            if tick is not None:
+                tick(1.0 - left / (h * w))      # the share of the tile's trees done
+            k += 1
+        if not add:
+            self.ctx.disable(moderngl.BLEND)
+        self._target(width, height).use()
 
     def first_hits(self, width: int, height: int, offset: tuple[float, float] = (0.5, 0.5)):
         """Per pixel, the first geometric surface along the camera ray through

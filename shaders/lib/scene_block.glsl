@@ -7,7 +7,8 @@
 //   NUM_OBJECTS, NUM_LIGHTS, NUM_TRANSPARENT (counts, may be 0)
 //   OBJECTS_LEN, MATERIALS_LEN, LIGHTS_LEN, MEDIA_LEN (array sizes, >= 1)
 //   STACK_SIZE (ray-tree stack: max_depth + 1 entries suffice for a
-//   depth-first walk that pushes at most two children per node)
+//   depth-first walk that pushes at most one child per node: it holds
+//   branches of strictly increasing depth, at most max_depth - 1)
 //   HAS_PLANE/SPHERE/BOX/CYLINDER, HAS_LIGHTS, HAS_DIELECTRIC,
 //   HAS_REFLECTION, HAS_SKY_IMAGE: the features the scene uses; code for
 //   the others is not compiled.
