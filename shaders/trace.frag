@@ -551,21 +551,27 @@ void walkNode(Branch br, inout vec3 sum, out Branch reflected, out Branch refrac
 uniform usampler2D resumeIn;   // the last pass's resumeOut (read where resumeFirst == 0)
 uniform int resumeFirst;       // 1: the sample's first pass, from the camera ray
 uniform int resumeBudget;      // nodes a pass traces at most
-uniform int resumeProbe;       // 2 (a loop's trip count the compiler cannot know)
 layout(location = 1) out uvec4 resumeOut;
+#endif
+
+#if defined(RESUME) || defined(CUT_CHECK)
+uniform int loopProbe;         // 2 (a loop's trip count the compiler cannot know)
 
 // Whether llvmpipe's loop limit has been reached in this invocation: from
 // then on every loop stops after its first iteration, so a two-iteration
 // loop runs once.  The limit counts iterations, not nodes (a node of many
-// lights or objects takes hundreds), so a pass checks after every node and
-// hands back the node that was cut, to be traced again (w = 2: Renderer
-// then gives the passes fewer nodes).
+// lights or objects takes hundreds), so a RESUME pass checks after every
+// node and hands back the node that was cut, to be traced again (w = 2:
+// Renderer then gives the passes fewer nodes); a CUT_CHECK render marks
+// the pixel (-inf) and Renderer.render draws the image again in passes.
 bool loopsCut() {
     int n = 0;
-    for (int i = 0; i < resumeProbe; ++i) ++n;
-    return n < resumeProbe;
+    for (int i = 0; i < loopProbe; ++i) ++n;
+    return n < loopProbe;
 }
+#endif
 
+#ifdef RESUME
 // path p cut to `level` bits, then bit `level` set to `one`
 uvec2 pathAt(uvec2 p, int level, bool one) {
     uint bit = one ? 1u : 0u;
@@ -742,6 +748,11 @@ void main() {
 #else
     vec3 L = radiance(vec3(0.0), dir) * params.w;
     fragColor = vec4(L, 1.0);
+#ifdef CUT_CHECK
+    // a tree cut short: -inf, which no radiance is (every one is >= 0) and
+    // which stays negative (or NaN) through the additive blending of samples
+    if (loopsCut()) fragColor.rgb = vec3(uintBitsToFloat(0xff800000u));
+#endif
 #ifdef ADAPTIVE
     fragMoments = vec4(dot(L, L), 0.0, 0.0, 0.0);
 #endif

@@ -58,6 +58,8 @@ class Renderer:
         self.specialise = specialise
         self.fresnel = fresnel
         self.extra_defines = dict(extra_defines or {})
+        self._force_resume = False          # render(): the one-pass image was cut, drawn again
+        self.last_render_resumed = False    # whether the last render() took resumable passes
         self._programs: dict[tuple, moderngl.Program] = {}
         self._subset_programs: dict[tuple, moderngl.Program] = {}
         self._subset_of: dict[tuple, tuple[frozenset, tuple]] = {}   # program key -> (objects, extra defines)
@@ -400,11 +402,25 @@ class Renderer:
             groups = self.programs_for(width, height, compile_all=True, **AdaptiveSampler.FOOTPRINT_SAMPLES)
         resume = None
         self._resume_budget = self.RESUME_BUDGET    # halved where a pass meets the loop limit
-        if self.resumes():
+        self.last_render_resumed = self._force_resume or self.resumes()
+        # a scene with glass draws in one pass a pixel and checks that the
+        # driver's loop limit cut no tree (-inf); if one was cut, the image
+        # is drawn again in resumable passes
+        check = self.cut_check and not self.last_render_resumed and bool(self._defines.get("HAS_DIELECTRIC"))
+        if self.last_render_resumed:
             # one program over the whole image (no culling variants: a deep
             # tree costs far more than the objects it could skip)
             extra = {"RESUME": 1, **(AdaptiveSampler.FOOTPRINT_SAMPLES if fp is not None else {})}
             resume = self.variant(**extra)
+        elif check:
+            extra = {"CUT_CHECK": 1, **(AdaptiveSampler.FOOTPRINT_SAMPLES if fp is not None else {})}
+            groups = self.programs_for(width, height, compile_all=True, **extra)
+
+        def bind_check(p: moderngl.Program) -> None:
+            if fp is not None:
+                fp.bind_footprint(p)
+            if "loopProbe" in p:
+                p["loopProbe"].value = 2
         ctx = self.ctx
         fbo = self._target(width, height)
         fbo.use()
@@ -430,10 +446,10 @@ class Renderer:
                     if resume is not None:
                         self._draw_resumable(resume, width, height, off, rect, i > 0,
                                              None if fp is None else fp.bind_footprint, tick)
-                    elif fp is None:
+                    elif fp is None and not check:
                         self.draw_sample(width, height, off, rect)
                     else:
-                        self.draw_groups(groups, width, height, off, rect, fp.bind_footprint)
+                        self.draw_groups(groups, width, height, off, rect, bind_check)
                     # Wait for each draw: the queue never holds more than one
                     # tile, so Ctrl-C (checked between draws) stops at once and
                     # the progress bar is truthful.
@@ -444,7 +460,17 @@ class Renderer:
                         progress(done, total)
         finally:
             ctx.disable(moderngl.BLEND)
-        return self._read_rgb(fbo, samples)
+        image = self._read_rgb(fbo, samples)
+        # a sample cut short is -inf (shaders/trace.frag, CUT_CHECK): every
+        # radiance is >= 0, so anything else (-inf, or NaN where it met an
+        # inf) marks it; about 1 ms at 1280x720
+        if check and not (image[..., 0] >= 0).all():
+            self._force_resume = True
+            try:
+                return self.render(width, height, samples, seed, progress, footprint)
+            finally:
+                self._force_resume = False
+        return image
 
     #: Nodes of a ray tree one draw traces at most (shaders/trace.frag,
     #: RESUME): far below what ends a shader on llvmpipe (65535 loop
@@ -457,18 +483,32 @@ class Renderer:
     #: second on llvmpipe, so Ctrl-C (taken between passes) ends at once.
     RESUME_TILE = 64
 
+    #: Trees whose bound (resumes) exceeds this many nodes are drawn in
+    #: resumable passes at once: one draw would only be cut and drawn again.
+    RESUME_AT_ONCE = 16384
+    #: Whether render() checks a one-pass image of a glass scene for trees
+    #: cut short (False: trust it, as the viewer does; for measuring the check).
+    cut_check = True
+
     def resumes(self) -> bool:
-        """Whether render() traces the scene's ray trees in resumable passes:
-        a scene with glass whose tree may have more than RESUME_BUDGET nodes.
-        Depth d holds at most 2^(d-1) of them, and at most 1 / min_weight:
-        a node's children weigh at most what it weighs (R + (1 - R) T <= 1),
-        so the weights at one depth add up to 1 at most.  (Without glass a
-        tree is a chain of at most max_depth nodes.)"""
+        """Whether render() goes straight to resumable passes: a scene with
+        glass whose tree may be far beyond what one draw holds.  Depth d
+        holds at most 2^(d-1) nodes, and at most 1 / min_weight: a node's
+        children weigh at most what it weighs (R + (1 - R) T <= 1), so the
+        weights at one depth add up to 1 at most.  The driver's limit counts
+        loop iterations, and every light adds to a node's (measured on
+        llvmpipe: two slabs at depth 9, 511 nodes, came out whole in one draw
+        with 1 to 32 lights and were cut with 64), so every 8 lights count as
+        one node more.  Below the bound, render() draws one pass a pixel and
+        checks for a cut (CUT_CHECK), which the shipped scenes, with bounds
+        up to 4,600, never meet: their real trees are a few dozen rays.
+        (Without glass a tree is a chain of at most max_depth nodes.)"""
         if not self._defines.get("HAS_DIELECTRIC"):
             return False
         r = self.scene.render
         per_depth = 1.0 / r.min_weight if r.min_weight > 0 else float("inf")
-        return sum(min(2.0 ** (d - 1), per_depth) for d in range(1, r.max_depth + 1)) > self.RESUME_BUDGET
+        nodes = sum(min(2.0 ** (d - 1), per_depth) for d in range(1, r.max_depth + 1))
+        return nodes * (1.0 + len(self.scene.lights) / 8.0) > self.RESUME_AT_ONCE
 
     def _resume_targets(self, width: int, height: int) -> list[moderngl.Framebuffer]:
         """Two framebuffers of the accumulation texture and a resume-state
@@ -511,7 +551,7 @@ class Renderer:
                     bind(p)
                 src.use(location=unit)
                 for name, v in (("resumeIn", unit), ("resumeFirst", int(k == 0)),
-                                ("resumeBudget", self._resume_budget), ("resumeProbe", 2)):
+                                ("resumeBudget", self._resume_budget), ("loopProbe", 2)):
                     if name in p:
                         p[name].value = v
 
