@@ -171,25 +171,36 @@ def test_ctrl_c_ends_a_render_of_endless_trees_at_once(tmp_path):
     assert not out.exists()
 
 
+def lit_slabs(max_depth: int, lights, intensity: float):
+    """Two slabs of glass with a specular highlight, lit by point lights at
+    `lights`: every light adds a shadow ray to every node of the tree."""
+    scene = slabs_scene([(0.5, 1.0), (-1.0, -0.5)], max_depth)
+    glass = scene.materials["glass"]
+    glass.color, glass.specular, glass.shininess = (1.0, 1.0, 1.0), 0.5, 2.0
+    scene.lights = [Light(type="point", position=p, intensity=intensity) for p in lights]
+    return scene
+
+
+def assert_centre_is_the_reference(img, scene):
+    o, d = reference.camera_rays(scene, 3, 3)
+    ref = reference.trace(scene, o.reshape(-1, 3)[4:5], d.reshape(-1, 3)[4:5])[0]
+    assert np.allclose(img[1, 1], ref, rtol=2e-6), (img[1, 1], ref)
+
+
 def test_wide_nodes_that_reach_the_loop_limit_are_traced_again(gl):
     # eight lights make a node of the slabs' tree cost over a hundred loop
     # iterations, so a pass of RESUME_BUDGET nodes met llvmpipe's limit
     # within the pass and the rest of it was dropped (1.9347 for 1.9398);
     # the shader now finds the cut (a two-iteration loop runs once), hands
     # the node back, and the renderer gives the passes fewer nodes
-    scene = slabs_scene([(0.5, 1.0), (-1.0, -0.5)], 14)
-    glass = scene.materials["glass"]
-    glass.color, glass.specular, glass.shininess = (1.0, 1.0, 1.0), 0.5, 2.0
-    scene.lights = [Light(type="point", position=(0.3 * i, 0.2, 2.0), intensity=0.1) for i in range(8)]
+    scene = lit_slabs(14, [(0.3 * i, 0.2, 2.0) for i in range(8)], 0.1)
     r = Renderer(gl, scene)
     try:
         assert r.resumes()
         img = r.render(3, 3, 1)
     finally:
         r.release()
-    o, d = reference.camera_rays(scene, 3, 3)
-    ref = reference.trace(scene, o.reshape(-1, 3)[4:5], d.reshape(-1, 3)[4:5])[0]
-    assert np.allclose(img[1, 1], ref, rtol=2e-6), (img[1, 1], ref)
+    assert_centre_is_the_reference(img, scene)
 
 
 def test_a_one_pass_render_cut_by_the_loop_limit_is_drawn_again(gl):
@@ -197,10 +208,7 @@ def test_a_one_pass_render_cut_by_the_loop_limit_is_drawn_again(gl):
     # node costs so many loop iterations that the one-draw tree was cut
     # (1.88638 for 1.88909); render() now finds the cut pixel (-inf) and
     # draws the image again in resumable passes
-    scene = slabs_scene([(0.5, 1.0), (-1.0, -0.5)], 9)
-    glass = scene.materials["glass"]
-    glass.color, glass.specular, glass.shininess = (1.0, 1.0, 1.0), 0.5, 2.0
-    scene.lights = [Light(type="point", position=(0.3 * i / 8, 0.2, 2.0), intensity=0.8 / 64) for i in range(64)]
+    scene = lit_slabs(9, [(0.3 * i / 8, 0.2, 2.0) for i in range(64)], 0.8 / 64)
     r = Renderer(gl, scene)
     try:
         assert not r.resumes()                 # not by the bound: one pass first
@@ -208,9 +216,7 @@ def test_a_one_pass_render_cut_by_the_loop_limit_is_drawn_again(gl):
         assert r.last_render_resumed           # the check found the cut
     finally:
         r.release()
-    o, d = reference.camera_rays(scene, 3, 3)
-    ref = reference.trace(scene, o.reshape(-1, 3)[4:5], d.reshape(-1, 3)[4:5])[0]
-    assert np.allclose(img[1, 1], ref, rtol=2e-6), (img[1, 1], ref)
+    assert_centre_is_the_reference(img, scene)
 
 
 def test_the_shipped_scenes_draw_in_one_pass(gl):
