@@ -472,12 +472,12 @@ class Renderer:
                 self._force_resume = False
         return image
 
-    #: Nodes of a ray tree one draw traces at most (shaders/trace.frag,
-    #: RESUME): far below what ends a shader on llvmpipe (65535 loop
-    #: iterations in all, a dozen or more per node) or a draw on a GPU's
-    #: watchdog.  A tree that may hold more (2^max_depth - 1 nodes, with
-    #: glass) is traced in passes of this many nodes, each resuming where
-    #: the last one stopped.
+    #: Nodes of a ray tree one resumable pass traces at most, to begin with
+    #: (shaders/trace.frag, RESUME): well below what ends a shader on
+    #: llvmpipe (65535 loop iterations in all: about a hundred a node with
+    #: one light, more with many) or a draw on a GPU's watchdog.  A pass
+    #: that meets the limit anyway hands its cut nodes back and the next
+    #: passes take half as many.
     RESUME_BUDGET = 512
     #: Tile side of resumable renders: a pass over it stays well under a
     #: second on llvmpipe, so Ctrl-C (taken between passes) ends at once.
