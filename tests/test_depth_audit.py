@@ -237,3 +237,18 @@ def test_the_shipped_scenes_draw_in_one_pass(gl):
                 assert not r.last_render_resumed
         finally:
             r.release()
+
+
+def test_one_draw_paths_warn_where_trees_may_be_cut(tmp_path):
+    # the cost view (like adaptive renders and the viewer) traces a tree in
+    # one draw: with trees far beyond one draw it says so on stderr; with
+    # the scene's own settings it says nothing
+    def cost(*extra):
+        p = subprocess.run([sys.executable, "-m", "viewer", "render", "-o", str(tmp_path / "c.npy"),
+                            "--size", "8x4", "--view", "cost", *extra], capture_output=True, text=True, timeout=120)
+        assert p.returncode == 0, p.stderr
+        return p.stderr
+
+    warned = cost("--max-depth", "20", "--min-weight", "0")
+    assert "warning" in warned and "max depth 20" in warned and "cost view" in warned
+    assert "warning" not in cost()

@@ -189,6 +189,9 @@ class Viewer:
         self.file_scene = copy.deepcopy(scene)  # as loaded: F5 takes what changed on disk since
         self.good_scene = copy.deepcopy(scene)  # the last scene the renderer accepted
         self.renderer = Renderer(self.ctx, scene)
+        warning = self.renderer.one_draw_warning("the viewer")
+        if warning:
+            print(warning, file=sys.stderr, flush=True)
         # adaptive accumulation with `view --adaptive` or the panel's "adaptive"
         # checkbox; off by default: it reaches a given error sooner, but a
         # still view then goes on tracing several times as long (README, "Viewer")

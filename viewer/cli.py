@@ -347,6 +347,11 @@ def cmd_render(args) -> int:
         ctx.release()
         raise
     timing = None
+    one_draw = "the adaptive render" if adaptive and args.view in ("color", "samples") else (
+        "the cost view" if args.view == "cost" else None)
+    warning = renderer.one_draw_warning(one_draw) if one_draw else None
+    if warning:
+        print(warning, file=sys.stderr)
     try:
         if adaptive:
             from .adaptive import DEFAULT_TARGET_ERROR, render_adaptive

@@ -510,6 +510,20 @@ class Renderer:
         nodes = sum(min(2.0 ** (d - 1), per_depth) for d in range(1, r.max_depth + 1))
         return nodes * (1.0 + len(self.scene.lights) / 8.0) > self.RESUME_AT_ONCE
 
+    def one_draw_warning(self, what: str) -> str | None:
+        """A line for stderr where `what` (the viewer, an adaptive render,
+        the cost view) traces each tree in one draw although the scene's
+        trees may be far beyond one draw (resumes): there the driver's loop
+        limit may cut them (render() alone traces them whole).  None where
+        it cannot happen."""
+        if not self.resumes():
+            return None
+        r = self.scene.render
+        return (f"glassray: warning: with max depth {r.max_depth} and min weight {r.min_weight:g} this scene's "
+                f"ray trees may hold more rays than one draw traces on this OpenGL driver; {what} traces each "
+                "tree in one draw and may lose its lightest branches (a uniform 'glassray render' traces "
+                "them whole)")
+
     def _resume_targets(self, width: int, height: int) -> list[moderngl.Framebuffer]:
         """Two framebuffers of the accumulation texture and a resume-state
         texture each (RGBA32UI): a pass reads one's state and writes the
