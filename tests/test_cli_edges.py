@@ -289,3 +289,17 @@ def test_an_output_that_cannot_be_written_fails_before_rendering(tmp_path, no_re
     assert cli.main(["render", "-o", str(out), "--size", "8x8"]) == 1
     err = capsys.readouterr().err
     assert says.format(d=tmp_path) in err and len(err.strip().splitlines()) == 1, err
+
+
+@needs_x
+def test_the_viewer_warns_once_where_trees_may_be_cut(xdisplay, tmp_path):
+    # the viewer traces a tree in one draw a sample: with trees far beyond
+    # what llvmpipe's loop limit lets one draw trace it says so, once, at
+    # the start (tests/test_depth_audit.py: render traces them whole)
+    r = viewer_run(xdisplay, tmp_path, "view", "--size", "64x36", "--no-vsync", "--soak", "3",
+                   "--max-depth", "20", "--min-weight", "0")
+    assert r.returncode == 0, r.stderr
+    assert r.stderr.count("glassray: warning: with max depth 20 and min weight 0") == 1, r.stderr
+    assert "the viewer traces each tree in one draw" in r.stderr
+    quiet = viewer_run(xdisplay, tmp_path, "view", "--size", "64x36", "--no-vsync", "--soak", "2")
+    assert quiet.returncode == 0 and "warning" not in quiet.stderr, quiet.stderr

@@ -189,9 +189,6 @@ class Viewer:
         self.file_scene = copy.deepcopy(scene)  # as loaded: F5 takes what changed on disk since
         self.good_scene = copy.deepcopy(scene)  # the last scene the renderer accepted
         self.renderer = Renderer(self.ctx, scene)
-        warning = self.renderer.one_draw_warning("the viewer")
-        if warning:
-            print(warning, file=sys.stderr, flush=True)
         # adaptive accumulation with `view --adaptive` or the panel's "adaptive"
         # checkbox; off by default: it reaches a given error sooner, but a
         # still view then goes on tracing several times as long (README, "Viewer")
@@ -208,6 +205,8 @@ class Viewer:
         self.last_change = time.perf_counter()
         self.message = ""
         self.message_until = 0.0
+        self._one_draw_warned = None
+        self._warn_one_draw()
         self.frame_ms = 0.0
         self.fps = 0.0
         self._fps_count = 0
@@ -455,6 +454,16 @@ class Viewer:
         if self.controls.view == "image":
             return not self.prog.done
         return self.debug_dirty or self.debug_res != (fbw, fbh)
+
+    def _warn_one_draw(self) -> None:
+        """Say (stderr and HUD) where the scene's trees may be more than the
+        one draw a sample the viewer gives them (Renderer.one_draw_warning):
+        at the start, and again whenever a change of settings makes it so."""
+        warning = self.renderer.one_draw_warning("the viewer")
+        if warning and warning != self._one_draw_warned:
+            print(warning, file=sys.stderr, flush=True)
+            self._say("trees this deep may be cut short here; 'glassray render' traces them whole")
+        self._one_draw_warned = warning
 
     def _say(self, text: str, error: bool = False) -> None:
         self.message = text
@@ -809,6 +818,7 @@ class Viewer:
             self.controls.camera_edited()
             self.controls.changed = False
             self.renderer.set_scene(self.scene)
+        self._warn_one_draw()
         self.prog.restart()
 
     def _set_adaptive(self, on: bool) -> None:
@@ -853,6 +863,7 @@ class Viewer:
         self.scene = merged
         self.file_scene = copy.deepcopy(fresh)
         self.good_scene = copy.deepcopy(merged)
+        self._warn_one_draw()
         self.controls.rebase(merged, start=fresh)
         if self.panel is not None:
             self.panel.error = ""
