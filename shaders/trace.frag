@@ -535,10 +535,10 @@ void walkNode(Branch br, inout vec3 sum, out Branch reflected, out Branch refrac
 // (max_depth + 1 entries are more than enough).  A scene with no glass has
 // chains only (no stack); one with no reflection either, the camera ray only.
 //
-// RESUME (Renderer.render of deep trees): Mesa's llvmpipe ends a shader
-// invocation, silently, after 65535 loop iterations counted over all its
-// loops together (a few thousand nodes here: the rest of the tree was
-// dropped), and a GPU's watchdog ends a long draw.  So a pass traces at most
+// RESUME (Renderer.render of deep trees): Mesa's llvmpipe stops every loop
+// of a shader invocation, silently, after 65535 loop iterations counted over
+// all its loops together (a few thousand nodes here: the rest of the tree
+// was dropped), and a GPU's watchdog ends a long draw.  So a pass traces at most
 // resumeBudget nodes and writes into resumeOut where it stopped: the path
 // from the camera ray to the next node, one bit per level (0: the child
 // walked first, 1: the other), its length, and w = 1 (0: the tree is done).

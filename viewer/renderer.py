@@ -398,8 +398,7 @@ class Renderer:
             footprint = self.takes_footprint(samples)
         fp = self.footprint_sampler(width, height) if footprint else None
         from .adaptive import AdaptiveSampler
-        if fp is not None:
-            groups = self.programs_for(width, height, compile_all=True, **AdaptiveSampler.FOOTPRINT_SAMPLES)
+        footprint_defines = AdaptiveSampler.FOOTPRINT_SAMPLES if fp is not None else {}
         resume = None
         self._resume_budget = self.RESUME_BUDGET    # halved where a pass meets the loop limit
         self.last_render_resumed = self._force_resume or self.resumes()
@@ -410,11 +409,10 @@ class Renderer:
         if self.last_render_resumed:
             # one program over the whole image (no culling variants: a deep
             # tree costs far more than the objects it could skip)
-            extra = {"RESUME": 1, **(AdaptiveSampler.FOOTPRINT_SAMPLES if fp is not None else {})}
-            resume = self.variant(**extra)
-        elif check:
-            extra = {"CUT_CHECK": 1, **(AdaptiveSampler.FOOTPRINT_SAMPLES if fp is not None else {})}
-            groups = self.programs_for(width, height, compile_all=True, **extra)
+            resume = self.variant(RESUME=1, **footprint_defines)
+        elif check or fp is not None:
+            groups = self.programs_for(width, height, compile_all=True,
+                                       **({"CUT_CHECK": 1} if check else {}), **footprint_defines)
 
         def bind_check(p: moderngl.Program) -> None:
             if fp is not None:
@@ -547,8 +545,9 @@ class Renderer:
                         add: bool, bind: Callable[[moderngl.Program], None] | None,
                         tick: Callable[[float], None] | None = None) -> None:
         """One sample of the tile `rect` with the RESUME program: passes of
-        at most RESUME_BUDGET nodes per pixel until every pixel's tree is
-        done, each pass adding its light (additive blending; the sample's
+        at most RESUME_BUDGET nodes per pixel (half as many after each pass
+        that met the loop limit) until every pixel's tree is done, each pass
+        adding its light (additive blending; the sample's
         first pass writes where `add` is false), Ctrl-C taken between them."""
         fbos = self._resume_targets(width, height)
         unit = 7                 # the sky is on unit 0, the footprint mask on its own
