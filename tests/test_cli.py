@@ -196,6 +196,32 @@ def test_the_progress_bar_waits_for_a_long_render_and_is_erased(monkeypatch):
             assert out == ""
 
 
+def test_the_progress_bar_starts_over_when_render_draws_again_in_passes(monkeypatch):
+    # render() reports the count going back when a cut tree makes it draw the
+    # image again: the bar is labelled so and its estimate uses its own clock
+    import io
+
+    from viewer import cli
+
+    class Tty(io.StringIO):
+        def isatty(self):
+            return True
+
+    clock = [100.0]
+    monkeypatch.setattr(cli.time, "perf_counter", lambda: clock[0])
+    err = Tty()
+    monkeypatch.setattr(cli.sys, "stderr", err)
+    show = cli._progress_bar("render 8x8", again="render 8x8 again")
+    clock[0] += 10.0
+    show(4, 4)                                   # the one-pass image: 10 s
+    show(0, 8)                                   # cut: drawn again in 8 parts
+    clock[0] += 1.0
+    show(2, 8)                                   # a quarter in 1 s
+    line = err.getvalue().rsplit("\r", 1)[1]
+    assert line.startswith("render 8x8 again [") and "25.0%" in line
+    assert "1.0s" in line and "eta   3.0s" in line, line
+
+
 def test_a_tiny_directional_light_direction_lights_as_any_other_length(tmp_path):
     # non-zero is all the spec asks; 1e-320 must not underflow to a zero length
     scene = ('[materials.m]\n[[objects]]\ntype = "sphere"\ncenter = [0, 0.9, 0]\nradius = 0.5\nmaterial = "m"\n'

@@ -242,18 +242,27 @@ def _load(args) -> "object":
 PROGRESS_AFTER_S = 0.5
 
 
-def _progress_bar(label: str):
+def _progress_bar(label: str, again: str | None = None):
     """A progress callback drawing a bar on stderr when it is a terminal:
     only for renders longer than PROGRESS_AFTER_S (a short one stays quiet),
-    and erased when done (so --timing leaves its one line)."""
+    and erased when done (so --timing leaves its one line).  A count that
+    goes back (render() drawing the image again in resumable passes after
+    the driver cut ray trees) starts the bar over, labelled `again`, with
+    its own clock for the estimate."""
     if not sys.stderr.isatty():
         return None
-    start = time.perf_counter()
+    start = [time.perf_counter()]
     shown = [0]                               # width of the line drawn (0: none)
+    last = [0]
+    name = [label]
 
     def show(done: int, total: int) -> None:
+        if done < last[0]:
+            start[0] = time.perf_counter()
+            name[0] = again or label
+        last[0] = done
         frac = done / total
-        elapsed = time.perf_counter() - start
+        elapsed = time.perf_counter() - start[0]
         if done >= total:
             if shown[0]:
                 sys.stderr.write("\r" + " " * shown[0] + "\r")
@@ -263,8 +272,8 @@ def _progress_bar(label: str):
             return
         bar = "#" * int(30 * frac)
         eta = elapsed / frac - elapsed if frac > 0 else 0.0
-        line = f"{label} [{bar:<30}] {100 * frac:5.1f}%  {elapsed:5.1f}s  eta {eta:5.1f}s"
-        sys.stderr.write("\r" + line)
+        line = f"{name[0]} [{bar:<30}] {100 * frac:5.1f}%  {elapsed:5.1f}s  eta {eta:5.1f}s"
+        sys.stderr.write("\r" + line + " " * max(0, shown[0] - len(line)))
         sys.stderr.flush()
         shown[0] = max(shown[0], len(line))
     return show
@@ -364,11 +373,11 @@ def cmd_render(args) -> int:
             def draw(progress=None):
                 return renderer.render(w, h, samples, args.seed, progress=progress)
         if args.view == "samples":
-            result = draw(_progress_bar(f"render {w}x{h}"))
+            result = draw(_progress_bar(f"render {w}x{h}", again=f"render {w}x{h} again in passes (ray trees were cut)"))
             return _write_view(renderer, args.view, w, h, out, samples_map=result.spp)
         if args.view != "color":
             return _write_view(renderer, args.view, w, h, out)
-        result = draw(_progress_bar(f"render {w}x{h}"))
+        result = draw(_progress_bar(f"render {w}x{h}", again=f"render {w}x{h} again in passes (ray trees were cut)"))
         image = result.image if adaptive else result
         if adaptive:
             print(f"render: adaptive, {result.mean_spp:.2f} samples per pixel on average "
