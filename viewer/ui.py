@@ -16,31 +16,49 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 from imgui_bundle import imgui
 
 from .controls import HELP_ALL as HELP, VIEWS, first_point_light
-from .scene import Light, Scene, save_scene
+from .scene import (MAX_LIGHTS, MAX_OBJECTS, MAX_TRANSPARENT_OBJECTS, Checker, Light, Material, Scene,
+                    SceneError, SceneObject, save_scene, scene_from_dict)
 
 _CLAMP = imgui.SliderFlags_.always_clamp
 _HDR = imgui.ColorEditFlags_.hdr | imgui.ColorEditFlags_.float
 _BIG = 1e6
+_SHAPES = ("sphere", "box", "cylinder", "plane")
+
+
+def _from_widget(x: float, old: float, lo: float = -math.inf, hi: float = math.inf) -> float:
+    """A value as an ImGui widget gave it back (a float32) turned into the
+    scene's: the old value where the widget left it as it was (ImGui holds
+    floats as float32: 3.2 came back 3.200000047683716, and "Save scene"
+    wrote that for values nobody touched), else the shortest decimal of the
+    float32 (0.002, not 0.0020000000949949026), inside [lo, hi]; a
+    non-finite one (typed "nan") is the old value."""
+    x = float(x)
+    if not math.isfinite(x):
+        return float(old)
+    if np.float32(x) == np.float32(old):
+        return float(old)
+    return min(max(float(str(np.float32(x))), lo), hi)
 
 
 def _color(label: str, value) -> tuple[bool, tuple[float, float, float]]:
     changed, col = imgui.color_edit3(label, [float(v) for v in value], _HDR)
-    col = tuple(max(0.0, float(c)) if math.isfinite(c) else 0.0 for c in col)
+    col = tuple(max(0.0, _from_widget(c, o, 0.0)) if math.isfinite(c) else float(o) for c, o in zip(col, value))
     return changed and col != tuple(value), col  # type: ignore[return-value]
 
 
 def _vec3(label: str, value, speed: float = 0.01, lo: float = -_BIG, hi: float = _BIG):
     changed, v = imgui.drag_float3(label, [float(x) for x in value], speed, lo, hi, "%.3f", _CLAMP)
-    v = tuple(float(x) if math.isfinite(x) else float(o) for x, o in zip(v, value))
+    v = tuple(_from_widget(x, o, lo, hi) for x, o in zip(v, value))
     return changed and v != tuple(value), v
 
 
 def _float(label: str, value: float, speed: float, lo: float, hi: float, fmt: str = "%.3f", flags: int = 0):
     changed, v = imgui.drag_float(label, float(value), speed, lo, hi, fmt, _CLAMP | flags)
-    v = min(max(float(v), lo), hi) if math.isfinite(v) else float(value)
+    v = _from_widget(v, value, lo, hi)
     return changed and v != value, v
 
 
@@ -74,6 +92,9 @@ class Panel:
         self.user_render: tuple[int, int, float] | None = None
         self.adaptive = True  # adaptive accumulation (the app keeps it in step with Progressive)
         self._drawn_size: tuple[float, float] | None = None  # the window size it was last drawn for
+        self.edit_note = ""  # why the last edit of objects, lights or materials was refused
+        self.sky_image = scene.sky.image or ""  # the sky picture's box
+        self.sky_note = ""  # why the picture in that box was refused
         self.rect = (0.0, 0.0, 0.0, 0.0)  # the panel's window: x0, y0, x1, y1
 
     def _open(self) -> None:
@@ -142,6 +163,13 @@ class Panel:
             self.save(scene)
         if self.status:
             imgui.text_wrapped(self.status)
+        if self.edit_note:  # an edit refused (it would make a scene the format rejects)
+            imgui.push_text_wrap_pos(0.0)
+            imgui.text_colored(imgui.ImVec4(1.0, 0.8, 0.3, 1.0), self.edit_note)
+            imgui.pop_text_wrap_pos()
+            imgui.same_line()
+            if imgui.small_button("ok##note"):
+                self.edit_note = ""
 
         self._open()
 
@@ -172,11 +200,13 @@ class Panel:
             imgui.end_disabled()
             imgui.begin_disabled(self.max_error_on)  # the pick sets these
             c, v = imgui.slider_int("max depth", r.max_depth, 1, 64, "%d", _CLAMP)
+            v = min(max(int(v), 1), 64)  # (ImGui clamps a typed value too; kept in range here as well)
             if c and v != r.max_depth:
-                r.max_depth, res.changed = int(v), True
+                r.max_depth, res.changed = v, True
             c, v = imgui.drag_int("samples", r.samples, 0.2, 1, 65536, "%d", _CLAMP)
+            v = min(max(int(v), 1), 65536)
             if c and v != r.samples:
-                r.samples, res.changed = int(min(max(v, 1), 65536)), True
+                r.samples, res.changed = v, True
             c, v = _float("min weight", r.min_weight, 0.0005, 0.0, 1.0, "%.4f")
             if c:
                 r.min_weight, res.changed = v, True
@@ -213,6 +243,7 @@ class Panel:
             if not scene.lights:
                 imgui.text_disabled("(no lights)")
             moved = first_point_light(scene)
+            remove = None
             for i, lt in enumerate(scene.lights):
                 imgui.push_id(f"light{i}")
                 label = f"light {i}" + (" (W/S/A/D/Q/E)" if i == moved else "")
@@ -220,8 +251,21 @@ class Panel:
                 if imgui.tree_node_ex(label, imgui.TreeNodeFlags_.default_open):
                     if self._light(lt, scene):
                         res.changed = True
+                    if imgui.small_button("remove light"):
+                        remove = i
                     imgui.tree_pop()
                 imgui.pop_id()
+            if remove is not None:
+                del scene.lights[remove]
+                res.changed = True
+            imgui.begin_disabled(len(scene.lights) >= MAX_LIGHTS)
+            for kind in ("point", "directional"):
+                if imgui.small_button(f"add {kind} light"):
+                    scene.lights.append(_new_light(kind, scene))
+                    res.changed = True
+                imgui.same_line()
+            imgui.new_line()
+            imgui.end_disabled()
             c, v = _color("ambient", scene.ambient)
             if c:
                 scene.ambient, res.changed = v, True
@@ -248,6 +292,16 @@ class Panel:
                     s.zenith, res.changed = v, True
             else:
                 imgui.text_wrapped(f"image: {s.image}")
+            # a picture for the "image" sky: relative to the scene file's folder
+            c, self.sky_image = imgui.input_text("##skyimage", self.sky_image)
+            imgui.same_line()
+            if imgui.small_button("use image"):
+                if self._load_sky_image(scene):
+                    res.changed = True
+            if imgui.is_item_hovered():
+                imgui.set_tooltip(f"PNG, JPEG or PFM, relative to {_base_dir(scene)}")
+            if self.sky_note:
+                imgui.text_wrapped(self.sky_note)
 
         self._open()
 
@@ -256,10 +310,17 @@ class Panel:
                 imgui.push_id(f"mat-{name}")
                 self._open()
                 if imgui.tree_node(name):
-                    if self._material(m):
+                    if self._material(m, name, scene):
                         res.changed = True
                     imgui.tree_pop()
                 imgui.pop_id()
+
+        self._open()
+
+        if imgui.collapsing_header("Objects"):
+            if self._objects(scene):
+                res.changed = True
+
 
     def _light(self, lt: Light, scene: Scene) -> bool:
         changed = False
@@ -296,7 +357,7 @@ class Panel:
             lt.intensity, changed = v, True
         return changed
 
-    def _material(self, m) -> bool:
+    def _material(self, m: Material, name: str = "", scene: Scene | None = None) -> bool:
         changed = False
         c, v = _color("color", m.color)
         if c:
@@ -314,7 +375,13 @@ class Panel:
         if c and not dielectric:
             m.reflectivity, changed = v, True
         c, v = _float("transparency", m.transparency, 0.005, 0.0, 1.0)
-        if c:
+        if c and v > 0 and not dielectric and scene is not None and _transparent_after(scene, name, True) \
+                > MAX_TRANSPARENT_OBJECTS:
+            # the shader keeps the media a ray is in as a 32-bit mask: a scene
+            # with more transparent objects is refused by the scene format
+            self.edit_note = (f"{name} stays opaque: {_transparent_after(scene, name, True)} transparent "
+                              f"objects, at most {MAX_TRANSPARENT_OBJECTS} are supported")
+        elif c:
             m.transparency, changed = v, True
             if v > 0 and m.reflectivity > 0:
                 m.reflectivity = 0.0  # a dielectric's reflection is Fresnel's (scene format)
@@ -327,14 +394,136 @@ class Panel:
         c, v = _color("emission", m.emission)
         if c:
             m.emission, changed = v, True
+        c, on = imgui.checkbox("checker", m.checker is not None)
+        if c and on != (m.checker is not None):
+            m.checker = Checker(color=_checker_color(m.color), size=0.5) if on else None
+            changed = True
         if m.checker is not None:
             c, v = _color("checker color", m.checker.color)
             if c:
                 m.checker.color, changed = v, True
+            own = m.checker.emission
+            c, v = _color("checker emission", m.emission if own is None else own)
+            if c:
+                m.checker.emission, changed = v, True
             c, v = _float("checker size", m.checker.size, 0.005, 1e-4, _BIG)
             if c:
                 m.checker.size, changed = v, True
         return changed
+
+    # ------------------------------------------------------------ objects
+
+    def _objects(self, scene: Scene) -> bool:
+        changed, remove = False, None
+        for i, o in enumerate(scene.objects):
+            imgui.push_id(f"obj{i}")
+            self._open()
+            if imgui.tree_node(f"{i}: {o.name or o.type}" + (f" ({o.type})" if o.name else "")):
+                if self._object(o, scene):
+                    changed = True
+                if imgui.small_button("own material"):
+                    # a copy of its material for it alone (edit it without
+                    # changing the other objects of that material)
+                    new = _unique(scene.materials, o.material)
+                    scene.materials[new] = copy.deepcopy(scene.materials[o.material])
+                    o.material = new
+                    changed = True
+                imgui.same_line()
+                if imgui.small_button("remove object"):
+                    remove = i
+                imgui.tree_pop()
+            imgui.pop_id()
+        if remove is not None:
+            del scene.objects[remove]
+            changed = True
+        if not scene.objects:
+            imgui.text_disabled("(no objects)")
+        imgui.begin_disabled(len(scene.objects) >= MAX_OBJECTS)
+        for shape in _SHAPES:
+            if imgui.small_button(f"add {shape}"):
+                o = _new_object(shape, scene)
+                if scene.is_transparent(o) and _transparent_count(scene) >= MAX_TRANSPARENT_OBJECTS:
+                    self.edit_note = f"not added: at most {MAX_TRANSPARENT_OBJECTS} transparent objects are supported"
+                else:
+                    scene.objects.append(o)
+                    changed = True
+            imgui.same_line()
+        imgui.new_line()
+        imgui.end_disabled()
+        return changed
+
+    def _object(self, o: SceneObject, scene: Scene) -> bool:
+        changed = False
+        names = list(scene.materials)
+        c, idx = imgui.combo("material", names.index(o.material) if o.material in names else 0, names)
+        if c and names[idx] != o.material:
+            new = names[idx]
+            if (scene.materials[new].is_dielectric and not scene.is_transparent(o)
+                    and _transparent_count(scene) >= MAX_TRANSPARENT_OBJECTS):
+                self.edit_note = (f"material {new} not taken: at most {MAX_TRANSPARENT_OBJECTS} "
+                                  "transparent objects are supported")
+            else:
+                o.material, changed = new, True
+        if o.type == "plane":
+            c, v = _float("height", o.height, 0.01, -_BIG, _BIG)
+            if c:
+                o.height, changed = v, True
+        elif o.type == "sphere":
+            c, v = _vec3("center", o.center)
+            if c:
+                o.center, changed = v, True
+            c, v = _float("radius", o.radius, 0.005, 1e-4, _BIG)
+            if c:
+                o.radius, changed = v, True
+        elif o.type == "box":
+            # each component of min below max's (scene format): an edit
+            # that would cross them stops there
+            c1, lo = _vec3("min", o.min)
+            c2, hi = _vec3("max", o.max)
+            if (c1 or c2) and all(a < b for a, b in zip(lo, hi)):
+                o.min, o.max, changed = lo, hi, True
+            c, v = _vec3("rotate", o.rotate, 0.5)
+            if c:
+                o.rotate, changed = v, True
+        else:
+            axes = ["x", "y", "z"]
+            c, idx = imgui.combo("axis", axes.index(o.axis), axes)
+            if c and axes[idx] != o.axis:
+                o.axis, changed = axes[idx], True
+            c, v = _vec3("base", o.base)
+            if c:
+                o.base, changed = v, True
+            # 0 < wall < radius and wall < height (scene format)
+            wall = o.wall or 0.0
+            c, v = _float("radius", o.radius, 0.005, 1e-4, _BIG)
+            if c and v > wall:
+                o.radius, changed = v, True
+            c, v = _float("height", o.height, 0.005, 1e-4, _BIG)
+            if c and v > wall:
+                o.height, changed = v, True
+            c, on = imgui.checkbox("wall (a vessel)", o.wall is not None)
+            if c and on != (o.wall is not None):
+                o.wall = _round(0.1 * min(o.radius, o.height)) if on else None
+                changed = True
+            if o.wall is not None:
+                c, v = _float("wall", o.wall, 0.001, 1e-5, _BIG, "%.4f")
+                if c and v < o.radius and v < o.height:
+                    o.wall, changed = v, True
+        return changed
+
+    def _load_sky_image(self, scene: Scene) -> bool:
+        """The picture in the box as the sky (validated as a scene file's
+        ``sky.image``: relative to the scene file's folder)."""
+        text = self.sky_image.strip()
+        try:
+            sky = scene_from_dict({"sky": {"type": "image", "image": text}}, source="sky", base_dir=_base_dir(scene)).sky
+        except SceneError as e:
+            self.sky_note = str(e)
+            return False
+        self.sky_note = ""
+        s = scene.sky
+        s.type, s.image, s.image_path = "image", sky.image, sky.image_path
+        return True
 
     # ------------------------------------------------------------ saving
 
@@ -355,6 +544,95 @@ class Panel:
         self.status = f"saved {path}"
         print(f"saved scene {path.resolve()}", flush=True)
         return True
+
+
+def _round(x: float) -> float:
+    return float(f"{x:.4g}")
+
+
+def _base_dir(scene: Scene) -> Path:
+    """The folder a relative sky picture is read from: the scene file's (as
+    when it is loaded); for a built-in scene (saved to the current folder)
+    the current folder."""
+    if scene.path is not None:
+        folder = Path(scene.path).resolve().parent
+        try:
+            from importlib import resources
+
+            if folder != Path(str(resources.files("viewer.scenes"))).resolve():
+                return folder
+        except Exception:
+            return folder
+    return Path.cwd()
+
+
+def _transparent_count(scene: Scene) -> int:
+    return sum(scene.is_transparent(o) for o in scene.objects)
+
+
+def _transparent_after(scene: Scene, name: str, dielectric: bool) -> int:
+    """The number of transparent objects once material `name` is (or is not) a dielectric."""
+    return sum(dielectric if o.material == name else scene.is_transparent(o) for o in scene.objects)
+
+
+def _unique(names, base: str) -> str:
+    k = 2
+    while f"{base}-{k}" in names:
+        k += 1
+    return f"{base}-{k}"
+
+
+def _checker_color(color) -> tuple[float, float, float]:
+    """The second colour of a new checker: the material's, darker (or lighter when it is dark)."""
+    bright = max(color) > 0.3
+    return tuple(_round(c * 0.3 if bright else min(1.0, c + 0.5)) for c in color)  # type: ignore[return-value]
+
+
+def _scale(scene: Scene) -> float:
+    """A size for new things: a tenth of the camera's distance to its target."""
+    d = math.dist(scene.camera.position, scene.camera.target)
+    return _round(max(1e-3, 0.1 * d))
+
+
+def _new_light(kind: str, scene: Scene) -> Light:
+    """A light that lights what the camera looks at: a point light above and
+    behind the camera, or a directional one shining the way the camera looks
+    and downward."""
+    cam = scene.camera
+    t, p = cam.target, cam.position
+    if kind == "point":
+        h = 5.0 * _scale(scene)
+        return Light(type="point", position=tuple(_round(p[k] + (h if k == 1 else 0.0)) for k in range(3)))
+    f = [t[k] - p[k] for k in range(3)]
+    n = math.hypot(*f) or 1.0
+    d = (_round(f[0] / n), _round(min(f[1] / n, 0.0) - 1.0), _round(f[2] / n))
+    return Light(type="directional", direction=d)
+
+
+def _new_object(shape: str, scene: Scene) -> SceneObject:
+    """A new solid of `shape` at the camera's target, sized to the view, of
+    the last object's material (an opaque one where there is one; a new
+    material where the scene has none)."""
+    if not scene.materials:
+        scene.materials["material"] = Material()
+    opaque = [o.material for o in scene.objects if not scene.is_transparent(o)]
+    mat = opaque[-1] if opaque else next((n for n, m in scene.materials.items() if not m.is_dielectric),
+                                         next(iter(scene.materials)))
+    t = tuple(_round(x) for x in scene.camera.target)
+    r = _scale(scene)
+    o = SceneObject(type=shape, material=mat)
+    if shape == "sphere":
+        o.center, o.radius = t, r
+    elif shape == "box":
+        o.min = tuple(_round(x - r) for x in t)
+        o.max = tuple(_round(x + r) for x in t)
+        if not all(a < b for a, b in zip(o.min, o.max)):          # rounded together far from the origin
+            o.min, o.max = tuple(x - r for x in t), tuple(x + r for x in t)
+    elif shape == "cylinder":
+        o.base, o.radius, o.height = t, r, 2 * r
+    else:
+        o.height = 0.0
+    return o
 
 
 def _camera_ok(pos, tgt) -> bool:
