@@ -389,6 +389,21 @@ def max_passes(scene: Scene) -> int:
     return max(crossings, 2 * len(scene.objects)) + 2
 
 
+#: Sizes of the ray-tree stack a program is compiled with: the smallest that
+#: holds max_depth + 1 entries.  Max depth itself is a uniform (iparams.x),
+#: so a new depth within a size (1..8, 9..16, 17..32, 33..64) compiles
+#: nothing: the panel's slider and --max-error's candidates reuse the
+#: program.  The default depth 8 gets 9, exactly what it needs.
+STACK_SIZES = (9, 17, 33, 65)
+
+
+def stack_size(max_depth: int) -> int:
+    """Entries of the ray-tree stack for trees of max_depth (trace.frag:
+    max_depth + 1 suffice)."""
+    need = max_depth + 1
+    return next((n for n in STACK_SIZES if n >= need), need)
+
+
 def shader_defines(scene: Scene, specialise: bool = True, fresnel: str = "exact",
                    subset: tuple[int, ...] | None = None) -> dict[str, object]:
     """Compile-time constants of the shader for this scene: counts, the
@@ -410,11 +425,11 @@ def shader_defines(scene: Scene, specialise: bool = True, fresnel: str = "exact"
         "MATERIALS_LEN": max(1, len(scene.materials)),
         "NUM_LIGHTS": len(scene.lights), "LIGHTS_LEN": max(1, len(scene.lights)),
         "NUM_TRANSPARENT": n_tr, "MEDIA_LEN": max(1, n_tr),
-        "STACK_SIZE": scene.render.max_depth + 1,
         "MAX_PASSES": max_passes(scene),
         **object_list_macros(scene, subset),
         **extra,
     }
+
     if scene.lights:
         d["HAS_LIGHTS"] = True
     for t in OBJ_TYPES:
@@ -422,6 +437,9 @@ def shader_defines(scene: Scene, specialise: bool = True, fresnel: str = "exact"
             d[f"HAS_{t.upper()}"] = True
     if any(scene.is_transparent(o) for o in present):
         d["HAS_DIELECTRIC"] = True
+        # only the dielectric tree has a stack (trace.frag): without glass
+        # the depth compiles nothing at all
+        d["STACK_SIZE"] = stack_size(scene.render.max_depth)
     if any(m.reflectivity > 0 for m in used):
         d["HAS_REFLECTION"] = True
     if scene.sky.type == "image":

@@ -8,7 +8,9 @@
 //   OBJECTS_LEN, MATERIALS_LEN, LIGHTS_LEN, MEDIA_LEN (array sizes, >= 1)
 //   STACK_SIZE (ray-tree stack: max_depth + 1 entries suffice for a
 //   depth-first walk that pushes at most one child per node: it holds
-//   branches of strictly increasing depth, at most max_depth - 1)
+//   branches of strictly increasing depth, at most max_depth - 1); with
+//   HAS_DIELECTRIC only, and rounded up to 9, 17, 33 or 65 so that a new
+//   max depth (a uniform) rarely compiles (gpu_scene.stack_size)
 //   HAS_PLANE/SPHERE/BOX/CYLINDER, HAS_LIGHTS, HAS_DIELECTRIC,
 //   HAS_REFLECTION, HAS_SKY_IMAGE: the features the scene uses; code for
 //   the others is not compiled.
