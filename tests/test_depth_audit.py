@@ -252,3 +252,44 @@ def test_one_draw_paths_warn_where_trees_may_be_cut(tmp_path):
     warned = cost("--max-depth", "20", "--min-weight", "0")
     assert "warning" in warned and "max depth 20" in warned and "cost view" in warned
     assert "warning" not in cost()
+
+
+def test_max_error_leaves_out_the_pixels_whose_reference_tree_was_cut(gl, tmp_path):
+    # --max-error measures its reference at max depth 16 and min weight 1e-4
+    # in one draw a sample: slabs of ior 10 (R = 0.67 at each face) lit by 8
+    # lights make that tree too large for llvmpipe's loop limit.  The slabs
+    # fill the left half of a 16x4 image (x < 0, a pinhole on the axis: no
+    # pixel straddles x = 0), the right half sees the lamp (radiance 1, no
+    # tree).  The cut half must be left out and said so; the other is exact
+    # at any setting, so the fastest meets the budget with error 0.  (The
+    # limit counts the iterations of a SIMD group of pixels, so llvmpipe
+    # flags a cut pixel's whole group: on a 4x2 image all 8 pixels were.)
+    from viewer import quality
+
+    lights = [(0.3 * i, 0.2, 2.0) for i in range(8)]
+    scene = make_scene({
+        "ambient": [0, 0, 0], "sky": {"type": "color", "color": [0, 0, 0]},
+        "camera": {"position": [0, 0, 3], "target": [0, 0, -1], "fov": 5},
+        "materials": {"glass": dict(BLACK, color=[1, 1, 1], specular=0.5, shininess=2, transparency=1, ior=10),
+                      "lamp": dict(BLACK, emission=[1, 1, 1])},
+        "lights": [{"type": "point", "position": list(p), "intensity": 0.1} for p in lights],
+        "objects": [{"type": "box", "min": [-BIG, -BIG, z0], "max": [0, BIG, z1], "material": "glass"}
+                    for z0, z1 in ((0.5, 1.0), (-1.0, -0.5))]
+        + [{"type": "box", "min": [-BIG, -BIG, -6], "max": [BIG, BIG, -5], "material": "lamp"}]})
+    for hit in (False, True):
+        choice = quality.choose(gl, scene, 16, 4, 0.01, root=tmp_path)
+        assert choice.cache_hit is hit
+        assert choice.cut_pixels == 32, choice.line()
+        assert "32 of the 64 pixels left out" in choice.line()
+        assert choice.met and choice.measured.rmse < 1e-6, choice.line()
+        assert choice.measured.candidate.samples == 1 and choice.measured.candidate.max_depth == 2
+
+
+def test_max_error_with_no_measurable_pixel_takes_the_setting_that_traces_most():
+    from viewer.quality import Candidate, Measured, pick
+
+    inf = float("inf")
+    pool = [Measured(Candidate(s, d, w), t, inf, 1.0)
+            for s, d, w, t in ((1, 2, 0.01, 1.0), (16, 10, 1e-4, 90.0), (4, 6, 1e-3, 20.0))]
+    m, met = pick(pool, 0.01)
+    assert not met and (m.candidate.samples, m.candidate.max_depth) == (16, 10)

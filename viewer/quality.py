@@ -142,6 +142,10 @@ def pick(measured: list[Measured], max_error: float) -> tuple[Measured, bool]:
     faster) and False.  A larger budget never gives a slower pick."""
     if not measured:
         raise ValueError("no measured candidates")
+    if not any(math.isfinite(m.rmse) for m in measured):
+        # no error could be measured (every measured pixel's tree was cut by
+        # the driver's loop limit): the slowest setting traces the most
+        return max(measured, key=lambda m: (m.time_ms, -m.rmse, m.candidate.key())), False
     ok = [m for m in measured if m.rmse <= max_error]
     if ok:
         return min(ok, key=lambda m: (m.time_ms, m.rmse, m.candidate.key())), True
@@ -296,10 +300,11 @@ class Cache:
             for k, m in doc["measured"].items():
                 c = Candidate(int(m["samples"]), int(m["max_depth"]), float(m["min_weight"]))
                 meas = Measured(c, float(m["time_ms"]), float(m["rmse"]), float(m.get("frac_off", 0.0)))
-                if c.key() != k or not all(math.isfinite(v) and v >= 0 for v in (meas.time_ms, meas.rmse)):
+                if c.key() != k or not (math.isfinite(meas.time_ms) and meas.time_ms >= 0 and meas.rmse >= 0):
                     raise ValueError(f"bad entry {k!r}")
                 out[k] = meas
             self.noise = float(doc.get("reference", {}).get("noise_rmse", float("nan")))
+            self.cut_pixels = int(doc.get("reference", {}).get("cut_pixels", 0))
             return out
         except (ValueError, KeyError, TypeError, AttributeError) as e:
             _warn_once(str(self.path), f"quality cache {self.path} is corrupt ({type(e).__name__}: {e}); "
@@ -318,7 +323,8 @@ class Cache:
             return None
         return ref.astype(np.float64)
 
-    def save(self, measured: dict[str, Measured], noise: float, reference: np.ndarray | None = None) -> bool:
+    def save(self, measured: dict[str, Measured], noise: float, reference: np.ndarray | None = None,
+             cut_pixels: int = 0) -> bool:
         import datetime as _dt
         import io
 
@@ -326,7 +332,7 @@ class Cache:
 
         doc = {"format": 1, "scene_name": self.key.name, "key": self.key.as_dict(),
                "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-               "reference": {"noise_rmse": noise},
+               "reference": {"noise_rmse": noise, "cut_pixels": cut_pixels},
                "measured": {k: {"samples": m.candidate.samples, "max_depth": m.candidate.max_depth,
                                 "min_weight": m.candidate.min_weight, "time_ms": m.time_ms,
                                 "rmse": m.rmse, "frac_off": m.frac_off}
@@ -364,6 +370,8 @@ def _window_renderer_class():
 
         def bind(self, prog, width, height, offset):
             super().bind(prog, width, height, offset)
+            if "loopProbe" in prog:
+                prog["loopProbe"].value = 2   # the CUT_CHECK probe loop's count (shaders/trace.frag)
             if self.full is None:
                 return
             W, H = self.full
@@ -376,7 +384,23 @@ def _window_renderer_class():
                 if name in prog:
                     prog[name].value = tuple(float(x) for x in v)
 
+        def draw_sample(self, width, height, offset, viewport=None, compile=True):
+            # The mosaic's passes of a scene with glass mark a pixel whose tree
+            # the driver's loop limit cut short with -inf (CUT_CHECK, as
+            # Renderer.render does): the measurement leaves those pixels out
+            # instead of taking a tree cut short for the converged image.
+            if self.full is None or not self._defines.get("HAS_DIELECTRIC"):
+                return super().draw_sample(width, height, offset, viewport, compile)
+            self.draw_groups([(self.variant(CUT_CHECK=1), [(0, 0, width, height)])], width, height, offset,
+                             viewport)
+
     return WindowRenderer
+
+
+def _uncut(image: np.ndarray) -> np.ndarray:
+    """(H, W) mask of the pixels no cut tree marked: every radiance is >= 0,
+    a cut sample is -inf (or NaN where it met an inf) and stays so in sums."""
+    return np.all(image >= 0, axis=-1)
 
 
 class Measurement:
@@ -388,7 +412,7 @@ class Measurement:
 
     def __init__(self, ctx, scene, lay: Layout, candidates: list[Candidate],
                  known: dict[str, Measured] | None = None, reference: np.ndarray | None = None,
-                 noise: float = float("nan")):
+                 noise: float = float("nan"), cut_pixels: int = 0):
         self.ctx = ctx
         self.scene = scene
         self.layout = lay
@@ -406,6 +430,9 @@ class Measurement:
         self.steps_done = 0
         self.done = not self.todo
         self.rendered_reference = False
+        #: measured pixels left out of the errors: a tree in them (the
+        #: reference's or a candidate's) was cut by the driver's loop limit
+        self.cut_pixels = cut_pixels
         self._renderer = None
         self._fbo = self._timing_fbo = None
         self._gen: Iterator[None] | None = None if self.done else self._run()
@@ -527,8 +554,11 @@ class Measurement:
             self._clear()
             yield from self._accumulate(sample_offsets(half, REFERENCE_SEED + 1))
             b = self._read(half)
-            self.reference = (a + b) / 2
-            self.noise = float(np.sqrt(np.mean((a - b) ** 2)) / 2)
+            keep = _uncut(a) & _uncut(b)
+            with np.errstate(invalid="ignore"):          # -inf + -inf, -inf - -inf: left out
+                self.reference = np.where(keep[..., None], (a + b) / 2, np.nan)
+            self.cut_pixels = int(keep.size - np.count_nonzero(keep))
+            self.noise = float(np.sqrt(np.mean((a[keep] - b[keep]) ** 2)) / 2) if keep.any() else float("nan")
             self.rendered_reference = True
         # time of a whole frame: the scaled-down picture's time scaled to all pixels
         scale = self.layout.full[0] * self.layout.full[1] / (self.layout.timing_size[0] * self.layout.timing_size[1])
@@ -543,7 +573,11 @@ class Measurement:
             for n in sample_counts:
                 self._clear()
                 yield from self._accumulate(sample_offsets(n, RENDER_SEED))
-                err = image_errors(self._read(n), self.reference)
+                image = self._read(n)
+                keep = _uncut(image) & np.isfinite(self.reference).all(axis=-1)
+                self.cut_pixels = max(self.cut_pixels, int(keep.size - np.count_nonzero(keep)))
+                err = (image_errors(image[keep], self.reference[keep]) if keep.any() else
+                       {"rmse": float("inf"), "frac_off": 1.0})
                 c = Candidate(n, d, wgt)
                 self.measured[c.key()] = Measured(c, n * per_pass * scale, err["rmse"], err["frac_off"])
 
@@ -576,16 +610,21 @@ class Choice:
     noise: float  # the reference's own sampling noise (RMSE, estimated)
     cache_path: Path | None = None
     candidates: int = 0
+    cut_pixels: int = 0  # measured pixels left out: the driver's loop limit cut their trees
 
     def line(self) -> str:
         m = self.measured
         W, H = self.layout.full
         t = f"{m.time_ms / 1000:.2f} s" if m.time_ms >= 1000 else f"{m.time_ms:.1f} ms"
         what = (f"picked {m.candidate.describe()}" if self.met else
-                f"no measured setting reaches it; using the most accurate: {m.candidate.describe()}")
+                f"no measured setting reaches it; using the most accurate: {m.candidate.describe()}"
+                if math.isfinite(m.rmse) else
+                f"no error could be measured; using the setting that traces the most: {m.candidate.describe()}")
         return (f"max-error {self.max_error:g}: {what} (measured RMSE {m.rmse:.3g}, {t} per {W}x{H} frame; "
                 f"{self.candidates} candidates measured on {self.layout.pixels} of its pixels, reference "
-                f"noise {self.noise:.2g}; cache {'hit' if self.cache_hit else 'miss'})")
+                f"noise {self.noise:.2g}; cache {'hit' if self.cache_hit else 'miss'})"
+                + (f"; {self.cut_pixels} of the {self.layout.pixels} pixels left out: this OpenGL driver's loop "
+                   "limit cut their ray trees, so the errors miss them" if self.cut_pixels else ""))
 
 
 def prepare(ctx, scene, width: int, height: int, samples: int | None = None, max_depth: int | None = None,
@@ -598,22 +637,23 @@ def prepare(ctx, scene, width: int, height: int, samples: int | None = None, max
     cands = candidate_grid(samples, max_depth, min_weight)
     known = cache.load()
     noise = getattr(cache, "noise", float("nan"))
+    cut = getattr(cache, "cut_pixels", 0)
     ref = None
     if any(c.key() not in known for c in cands):
         ref = cache.load_reference() if known else None
         if ref is None:
             known = {}  # a new reference: the old errors were measured against another one
-    return Measurement(ctx, scene, lay, cands, known, ref, noise), cache, cands
+    return Measurement(ctx, scene, lay, cands, known, ref, noise, cut), cache, cands
 
 
 def finish(meas: Measurement, cache: Cache, cands: list[Candidate], max_error: float) -> Choice:
     """Save what was measured and pick."""
     hit = not meas.todo
     if not hit:
-        cache.save(meas.measured, meas.noise, meas.reference)
+        cache.save(meas.measured, meas.noise, meas.reference, meas.cut_pixels)
     pool = [meas.measured[c.key()] for c in cands]
     m, met = pick(pool, max_error)
-    return Choice(m, met, max_error, hit, meas.layout, meas.noise, cache.path, len(pool))
+    return Choice(m, met, max_error, hit, meas.layout, meas.noise, cache.path, len(pool), meas.cut_pixels)
 
 
 def choose(ctx, scene, width: int, height: int, max_error: float, samples: int | None = None,
