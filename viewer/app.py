@@ -166,6 +166,11 @@ class Viewer:
         self.renderer = None
         self.prog = None
         self._imgui_ready = False
+        # what close() releases, set before _open can fail (a shader that does
+        # not compile, a sky picture too large for the driver): close() then
+        # met none of them and raised AttributeError, which hid the error
+        self.quality_job = None
+        self.debug_tex = self.debug_fbo = None
         self._errors = _init_glfw()
         try:
             self._open(scene)

@@ -101,8 +101,13 @@ class Controls:
         self.scene = scene
         self._start_camera = replace(start.camera)
         self._start_lights = copy.deepcopy(start.lights)
-        self.camera = OrbitCamera.look_at(scene.camera.position, scene.camera.target, scene.camera.fov)
-        start_distance = OrbitCamera.look_at(start.camera.position, start.camera.target).distance
+        # the camera's limits and the light's step scale with the scene (the
+        # format has no unit: a scene in nanometres moves as the same scene
+        # at unit size does), taken from the camera it starts with
+        self._limits = OrbitCamera.limits_for(start.camera.position, start.camera.target)
+        self.camera = OrbitCamera.look_at(scene.camera.position, scene.camera.target, scene.camera.fov,
+                                          self._limits)
+        start_distance = math.dist(start.camera.position, start.camera.target)
         self.light_step = LIGHT_STEP_FRACTION * start_distance
         self.changed = True
 
@@ -124,7 +129,7 @@ class Controls:
         """The scene's camera was edited directly (settings panel): follow it."""
         c = self.scene.camera
         try:
-            self.camera = OrbitCamera.look_at(c.position, c.target, c.fov)
+            self.camera = OrbitCamera.look_at(c.position, c.target, c.fov, self._limits)
         except ValueError:  # position == target: keep the orbit camera, put it back
             pass
         self._sync_scene_camera()
@@ -234,7 +239,10 @@ class Controls:
         lt = self.scene.lights[i]
         p = list(lt.position)
         p[axis] += steps * self.light_step
-        if not all(math.isfinite(v) and abs(v) <= 1e7 for v in p):
+        # any finite position is a valid one (the renderer takes a light
+        # 1e300 away as well); a light so far out that a step is lost in
+        # rounding does not move, and that is no change
+        if not all(math.isfinite(v) for v in p) or tuple(p) == tuple(lt.position):
             return False
         lt.position = (p[0], p[1], p[2])
         self.changed = True
@@ -255,7 +263,7 @@ class Controls:
         self.scene.camera = replace(self._start_camera)
         self.scene.lights = copy.deepcopy(self._start_lights)
         self.camera = OrbitCamera.look_at(self._start_camera.position, self._start_camera.target,
-                                          self._start_camera.fov)
+                                          self._start_camera.fov, self._limits)
         self.changed = True
 
 
