@@ -1111,6 +1111,10 @@ def run(args) -> int:
     except Exception as e:
         if debug:
             raise
+        from .peer import PeerError     # viewer.peer imports Mitsuba only when used
+        if isinstance(e, PeerError):    # a message for the user (Mitsuba missing, its variant unusable)
+            print(f"glassray: {e}", file=sys.stderr)
+            return 1
         print(f"glassray: bench failed: {type(e).__name__}: {e} (run with --debug for the traceback)",
               file=sys.stderr)
         return 1

@@ -27,8 +27,12 @@ Conventions, each checked by tests/test_peer.py:
   from frac(v) > 1/2 (checked by rendering: tests/test_peer.py), that is
   where floor(x/size) + floor(z/size) is odd -- the spec's ``checker``
   squares;
-* emission-only opaque materials: a black ``diffuse`` BSDF (without one
-  Mitsuba gives an emitter a grey diffuse BSDF) plus an ``area`` emitter;
+* emission-only opaque materials: a black *delta* BSDF (a ``conductor``
+  with ``specular_reflectance`` 0; without a BSDF Mitsuba gives an emitter a
+  grey diffuse one) plus an ``area`` emitter.  Not a black ``diffuse``: on a
+  smooth BSDF the path tracer samples an emitter at every hit (a shadow ray
+  whose contribution is 0 here), which took 1.5-1.6x the CPU time for the
+  very same image (tests/test_peer_audit.py);
   ``reflectivity`` r > 0: a perfect mirror (``conductor``, material
   ``none``) scaled by r;
 * clear dielectrics: ``dielectric`` with ``int_ior = ior`` and ``ext_ior =
@@ -45,6 +49,7 @@ else ``scalar_rgb``.  ``GLASSRAY_PEER_VARIANT`` forces one.
 
 from __future__ import annotations
 
+import copy
 import glob
 import math
 import os
@@ -67,6 +72,13 @@ VARIANTS = ("llvm_ad_rgb", "scalar_rgb")
 #: multijitter it had the lowest error per sample on whitted-exact (0.030
 #: against 0.048 and 0.036 RMSE at 16 spp, 320x180), so the peer runs at its best.
 DEFAULT_SAMPLER = "multijitter"
+#: The BSDF of an opaque material that only emits: black, and delta, so that
+#: the path tracer spends no shadow ray on it (a black ``diffuse`` one gives
+#: the same image bit for bit in 1.47-1.64x the CPU time: whitted-glass at
+#: 320x180, 1024 to 9216 samples; whitted-exact 1.4x at 256).
+BLACK_BSDF = {"type": "conductor", "material": "none", "specular_reflectance": {"type": "rgb", "value": [0.0, 0.0, 0.0]}}
+#: Measured: scalar_rgb against llvm_ad_rgb (whitted-glass, 160x90, 256 samples).
+SCALAR_SLOWDOWN = "scalar_rgb took 6.4x the CPU time of llvm_ad_rgb on whitted-glass at 160x90"
 #: The floor's outermost ring, in scene units from the origin.
 FLOOR_EXTENT = 1.0e6
 
@@ -444,7 +456,8 @@ def _material_parts(m: Material, checker_uv: bool) -> dict:
     if m.reflectivity > 0:
         bsdf = {"type": "conductor", "material": "none", "specular_reflectance": _rgb((m.reflectivity,) * 3)}
     else:
-        bsdf = {"type": "diffuse", "reflectance": _rgb((0.0, 0.0, 0.0))}
+        # black and delta: no next-event estimation at a surface that reflects nothing
+        bsdf = copy.deepcopy(BLACK_BSDF)
     out = {"bsdf": bsdf}
     em0 = tuple(m.emission)
     em1 = tuple(m.checker.emission) if m.checker is not None and m.checker.emission is not None else em0
@@ -607,6 +620,28 @@ class MitsubaPeer:
         return a[..., :3] * self.scene.render.exposure
 
 
+def slow_variant_warning(variant: str) -> str | None:
+    """What a report must say when the peer is not Mitsuba's fastest CPU
+    variant (None when it is)."""
+    if variant == VARIANTS[0]:
+        return None
+    return (f"Mitsuba runs its {variant} variant, not {VARIANTS[0]} (its fastest on a CPU, which needs a "
+            f"working libLLVM >= 16): several times slower per sample ({SCALAR_SLOWDOWN}), so these ratios "
+            "overstate glassray's lead")
+
+
+def llvmpipe_threads() -> int | None:
+    """How many llvmpipe rasteriser threads this process runs (Linux: the
+    threads named llvmpipe-N), None where that cannot be seen."""
+    try:
+        names = [open(os.path.join("/proc/self/task", t, "comm")).read().strip()
+                 for t in os.listdir("/proc/self/task")]
+    except OSError:
+        return None
+    n = sum(1 for c in names if c.startswith("llvmpipe-"))
+    return n or None
+
+
 def peer_info(peer: MitsubaPeer | None = None) -> dict:
     import drjit as dr
     import mitsuba as mi
@@ -616,6 +651,7 @@ def peer_info(peer: MitsubaPeer | None = None) -> dict:
         info.update({"variant": peer.variant, "variant_note": peer.variant_note, "threads": peer.threads,
                      "sampler": peer.sampler, "integrator": f"path, max_depth {peer.max_depth}, rr_depth 5 "
                      "(Mitsuba's default), hide_emitters false", "rfilter": "box", "fov_axis": "y",
+                     "emitter_bsdf": "black conductor (delta: no shadow rays)",
                      "scene_load_s": round(peer.load_s, 3)})
     return info
 
@@ -866,6 +902,10 @@ def run_bench(args, ctx, backend: str, name: str, scene, width: int, height: int
     info["peer"] = peer_info(peer)
     log(f"peer: Mitsuba {info['peer']['mitsuba']} ({peer.variant_note}), {peer.threads} threads, "
         f"sampler {peer.sampler}, path tracer max depth {peer.max_depth}")
+    slow = slow_variant_warning(peer.variant)
+    if slow:
+        info["peer"]["warning"] = slow
+        log(f"warning: {slow}")
 
     refined = bench.effective_refine(ref_samples, refine)
     ref_text = bench.reference_text(ref_samples, refined)
@@ -933,6 +973,7 @@ def run_bench(args, ctx, backend: str, name: str, scene, width: int, height: int
                 p.cpu_times.append((time.process_time() - c0) * 1000.0)
             log(f"round {k + 1}/{repeat} done")
         built_timed = renderer.programs_built - built
+        gl_threads = llvmpipe_threads()
         if built_timed:
             log(f"warning: glassray's timed renders built {built_timed} shader programs")
     finally:
@@ -948,7 +989,8 @@ def run_bench(args, ctx, backend: str, name: str, scene, width: int, height: int
                       "refine_tolerance": bench.REFINE_TOLERANCE if refined else None, "seed": bench.REFERENCE_SEED,
                       "max_depth": bench.REFERENCE_MAX_DEPTH, "min_weight": bench.REFERENCE_MIN_WEIGHT},
         "glassray": {"max_depth": scene.render.max_depth, "min_weight": scene.render.min_weight,
-                     "programs_built_in_timed_rounds": built_timed,
+                     "programs_built_in_timed_rounds": built_timed, "llvmpipe_threads": gl_threads,
+                     "LP_NUM_THREADS": os.environ.get("LP_NUM_THREADS"),
                      "sampling": "stratified sub-pixel offsets (viewer.sampling), uniform over the image"},
         "adaptive": ({"budgets_spp": list(a_budgets), "target": DEFAULT_TARGET_ERROR} if adaptive else None),
         "time_to_error": {clock: [{"target": e, "glassray_ms": tg[0], "mitsuba_ms": tm[0],
@@ -967,13 +1009,22 @@ def run_bench(args, ctx, backend: str, name: str, scene, width: int, height: int
         f"glassray: GLSL shader on {info['gl']} via {backend}, max depth {scene.render.max_depth}, "
         f"min weight {scene.render.min_weight:g}, stratified samples",
         f"peer: Mitsuba {info['peer']['mitsuba']} (Dr.Jit {info['peer']['drjit']}), variant {peer.variant_note}, "
-        f"{peer.threads} threads, path tracer max depth {peer.max_depth}, {peer.sampler} sampler, box filter",
+        f"{peer.threads} threads, path tracer max depth {peer.max_depth}, {peer.sampler} sampler, box filter, "
+        "black delta BSDF on surfaces that only emit (no shadow rays)",
+        f"threads: Mitsuba {peer.threads}, llvmpipe "
+        + (f"{gl_threads}" if gl_threads is not None else "its default")
+        + (f" (LP_NUM_THREADS={os.environ['LP_NUM_THREADS']})" if os.environ.get("LP_NUM_THREADS") else "")
+        + f", on {info['cpus_usable']} usable CPUs",
         f"error: RMSE (linear) against the float64 reference, {ref_text} (seed {bench.REFERENCE_SEED}), "
-        f"max depth {bench.REFERENCE_MAX_DEPTH}, min weight {bench.REFERENCE_MIN_WEIGHT:g}",
-        f"time: median of {repeat} interleaved timed renders after untimed warm-up renders; each render finished "
-        "(read back) before the clock stops; time to reach an error: log-log interpolation between measured "
-        "points, no extrapolation",
+        f"max depth {bench.REFERENCE_MAX_DEPTH}, min weight {bench.REFERENCE_MIN_WEIGHT:g}; the same function "
+        "and reference for both renderers",
+        f"time: median of {repeat} interleaved timed renders after untimed warm-up renders (compiling is not "
+        "timed for either: glassray's shader programs, Mitsuba's kernel for each sample count); each render "
+        "finished (read back) before the clock stops; time to reach an error: log-log interpolation between "
+        "measured points, no extrapolation",
     ]
+    if slow:
+        header.append(f"WARNING: {slow}")
     text = "\n".join(f"    {h}" for h in header) + "\n\n### Measured series\n\n" + _series_table(series)
     for clock, title in (("wall", "wall clock"), ("cpu", "CPU time of the process")):
         text += (f"\n\n### Time to reach an RMSE ({title}); ratio = how many times sooner glassray gets there\n\n"
