@@ -72,16 +72,18 @@ class Script:
         return widget
 
 
-@pytest.fixture
-def ui():
-    imgui.create_context()
-    io = imgui.get_io()
-    io.set_ini_filename(None)
-    io.display_size = imgui.ImVec2(1280, 720)
-    io.delta_time = 1 / 60
-    io.backend_flags |= imgui.BackendFlags_.renderer_has_textures
-    yield io
-    imgui.destroy_context()
+from test_panel import ui  # noqa: E402,F401  (the headless ImGui context fixture)
+
+
+def compile_counter(script, panel, scene, renderer):
+    """edits -> programs the renderer builds for them (set_scene is what the
+    window calls after every panel edit)."""
+    def compiles(**edits):
+        edit(script, panel, scene, **edits)
+        before = renderer.programs_built
+        renderer.set_scene(scene)
+        return renderer.programs_built - before
+    return compiles
 
 
 @pytest.fixture
@@ -363,12 +365,7 @@ def test_value_edits_compile_nothing_feature_edits_once_and_back_reuses(script, 
     renderer = Renderer(gl, scene)
     renderer.cull = False
     try:
-        def compiles(**edits):
-            edit(script, panel, scene, **edits)
-            before = renderer.programs_built
-            renderer.set_scene(scene)
-            return renderer.programs_built - before
-
+        compiles = compile_counter(script, panel, scene, renderer)
         values = [{"light0/position": (1.0, 6.0, 2.0)}, {"light0/intensity": 2.0}, {"ambient": (0.1, 0.1, 0.2)},
                   {"mat-glass/ior": 1.7}, {"mat-glass/color": (0.9, 1.0, 0.9)}, {"exposure": 1.5},
                   {"min weight": 0.01}, {"samples": 4}, {"fov": 50.0}, {"obj1/radius": 0.7},
@@ -404,12 +401,7 @@ def test_the_sky_picture_switched_on_compiles_once(script, gl, tmp_path, monkeyp
     renderer = Renderer(gl, scene)
     renderer.cull = False
     try:
-        def compiles(**edits):
-            edit(script, panel, scene, **edits)
-            before = renderer.programs_built
-            renderer.set_scene(scene)
-            return renderer.programs_built - before
-
+        compiles = compile_counter(script, panel, scene, renderer)
         edit(script, panel, scene, **{"##skyimage": "sky.png"})
         assert compiles(**{"use image": True}) == 1
         assert compiles(**{"type": "gradient"}) == 0
