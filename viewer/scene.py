@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import datetime
 import errno
+import itertools
 import math
 import os
 import re
@@ -803,6 +804,40 @@ def scene_to_toml(scene: Scene, dest: Path | None = None) -> str:
     return tomli_w.dumps(scene_to_dict(scene, dest))
 
 
+def _new_file_mode() -> int:
+    """The mode a plain open() gives a new file: 0666 less the umask."""
+    umask = os.umask(0)
+    os.umask(umask)
+    return 0o666 & ~umask
+
+
+def _write_temp(folder: Path, name: str, data: bytes, mode: int) -> str:
+    """A temporary file in `folder` (named after `name`) holding `data`,
+    flushed to disk, with `mode`; its path.  Removed again if that fails."""
+    fd, tmp = tempfile.mkstemp(prefix=f".{name}.", suffix=".tmp", dir=folder)
+    try:
+        f = os.fdopen(fd, "wb")           # (closes fd whatever happens next)
+        try:
+            os.chmod(tmp, mode)           # mkstemp makes it 0600
+        except OSError:
+            pass  # a file system without modes (FAT, some network mounts): the file is still written
+        with f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+    except BaseException:
+        _unlink_quietly(tmp)
+        raise
+    return tmp
+
+
+def _unlink_quietly(path: str) -> None:
+    try:
+        os.unlink(path)
+    except OSError:
+        pass
+
+
 def write_atomic(path: Path, data: bytes) -> None:
     """Write to a temporary file beside ``path`` and rename it into place, so a
     failed write never leaves a half-written or destroyed file.  A symbolic
@@ -815,32 +850,54 @@ def write_atomic(path: Path, data: bytes) -> None:
     # read-only is refused, as a plain open() for writing refuses it
     if path.exists() and not path.is_dir() and not os.access(path, os.W_OK):
         raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), str(path))
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent or ".")
     try:
-        # mkstemp makes the file 0600; give it the mode a plain open() would
-        # (the existing file's, else 0666 less the umask).
-        try:
-            mode = path.stat().st_mode & 0o7777
-        except OSError:
-            umask = os.umask(0)
-            os.umask(umask)
-            mode = 0o666 & ~umask
-        f = os.fdopen(fd, "wb")           # (closes fd whatever happens next)
-        try:
-            os.chmod(tmp, mode)
-        except OSError:
-            pass  # a file system without modes (FAT, some network mounts): the file is still written
-        with f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
+        mode = path.stat().st_mode & 0o7777      # the existing file's, as open() keeps it
+    except OSError:
+        mode = _new_file_mode()
+    tmp = _write_temp(path.parent, path.name, data, mode)
+    try:
         os.replace(tmp, path)
     except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
+        _unlink_quietly(tmp)
         raise
+
+
+def write_new(paths, data: bytes) -> Path:
+    """Write `data` under the first of `paths` (an iterable of names in one
+    folder, tried in order) that no file has, and return it.  Never
+    replaces a file, also one another program creates between the check
+    and the write (two viewers saving a screenshot in the same second): the
+    complete file is linked to the name, which fails if the name is taken.
+    Where the file system has no hard links, the name is created exclusively
+    (O_EXCL) and written: still never a replaced file, but a crash during
+    the write can leave a short one."""
+    paths = iter(paths)
+    first = Path(next(paths))
+    tmp = _write_temp(first.parent, first.name, data, _new_file_mode())
+    try:
+        linked = True
+        for path in itertools.chain([first], map(Path, paths)):
+            if linked:
+                try:
+                    os.link(tmp, path)
+                    return path
+                except FileExistsError:
+                    continue
+                except OSError as e:
+                    if e.errno not in (errno.EPERM, errno.ENOTSUP, errno.EOPNOTSUPP, errno.EMLINK, errno.ENOSYS):
+                        raise
+                    linked = False               # no hard links here: exclusive creation instead
+            try:
+                with open(path, "xb") as f:
+                    f.write(data)
+                    f.flush()
+                    os.fsync(f.fileno())
+                return path
+            except FileExistsError:
+                continue
+        raise FileExistsError(errno.EEXIST, "every name is taken", str(first))
+    finally:
+        _unlink_quietly(tmp)
 
 
 def save_scene(scene: Scene, path: Path) -> None:
