@@ -681,8 +681,9 @@ GLASSRAY_SPP = (1, 2, 4, 8, 16, 32, 64, 128, 256)
 #: the powers of 4 took 8.7-9.5 ms of wall time, the counts 9 * 4^k
 #: 11.0-11.8 ms (the rounded counts of the earlier series: 12.4-13.1 ms), so
 #: the README also gives the ratio at the 4096 point's rate.  Up to the time
-#: limit.
-MITSUBA_SPP = (1, 4, 9, 16, 36, 64, 144, 256, 576, 1024, 2304, 4096, 9216, 16384)
+#: limit (36864 = 192^2 only with --peer-time-limit over 16384's time: about
+#: 47 s on a 2-core machine).
+MITSUBA_SPP = (1, 4, 9, 16, 36, 64, 144, 256, 576, 1024, 2304, 4096, 9216, 16384, 36864)
 #: The adaptive series: `render --adaptive --samples N` at the default
 #: target error, N = each of these budgets (mean rays per pixel).
 ADAPTIVE_BUDGETS = (2, 4, 8, 16, 32, 64, 128)     # ≤256 stops where ≤128 does (the target)
@@ -690,7 +691,7 @@ QUICK_GLASSRAY_SPP = (1, 2, 4)
 QUICK_MITSUBA_SPP = (1, 2, 4, 8)
 QUICK_ADAPTIVE_BUDGETS = (4, 8)
 TARGET_ERRORS = (0.1, 0.07, 0.05, 0.04, 0.03, 0.025, 0.02, 0.015, 0.01, 0.007, 0.005, 0.004, 0.003,
-                 0.002, 0.0015, 0.0012, 0.001)
+                 0.002, 0.0015, 0.0012, 0.001, 0.0008, 0.0007)
 #: A Mitsuba point whose warm-up render took longer than this (seconds) ends
 #: its series: the next sample count (MITSUBA_SPP: 1.78-4 times as many)
 #: would take that much longer.
