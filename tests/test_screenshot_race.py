@@ -72,3 +72,19 @@ def test_a_new_screenshot_gets_the_mode_a_plain_open_gives(tmp_path):
     finally:
         os.umask(umask)
     assert p.stat().st_mode & 0o777 == 0o644
+
+
+def test_a_failed_write_without_hard_links_leaves_no_short_file(monkeypatch, tmp_path):
+    monkeypatch.setattr(scene_mod.os, "link", lambda *a, **kw: (_ for _ in ()).throw(OSError(errno.EPERM, "no")))
+    real_fsync = os.fsync
+    calls = []
+
+    def fsync(fd):
+        calls.append(fd)
+        if len(calls) == 2:                           # the temporary file's passes, the named file's fails
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real_fsync(fd)
+    monkeypatch.setattr(scene_mod.os, "fsync", fsync)
+    with pytest.raises(OSError):
+        save_linear(np.zeros((1, 1, 3), np.float32), tmp_path, WHEN)
+    assert list(tmp_path.iterdir()) == []

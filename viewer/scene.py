@@ -869,8 +869,8 @@ def write_new(paths, data: bytes) -> Path:
     and the write (two viewers saving a screenshot in the same second): the
     complete file is linked to the name, which fails if the name is taken.
     Where the file system has no hard links, the name is created exclusively
-    (O_EXCL) and written: still never a replaced file, but a crash during
-    the write can leave a short one."""
+    (O_EXCL) and written: still never a replaced file; a failed write
+    removes it, but a crash during the write can leave a short one."""
     paths = iter(paths)
     first = Path(next(paths))
     tmp = _write_temp(first.parent, first.name, data, _new_file_mode())
@@ -888,13 +888,18 @@ def write_new(paths, data: bytes) -> Path:
                         raise
                     linked = False               # no hard links here: exclusive creation instead
             try:
-                with open(path, "xb") as f:
+                f = open(path, "xb")
+            except FileExistsError:
+                continue
+            try:
+                with f:
                     f.write(data)
                     f.flush()
                     os.fsync(f.fileno())
-                return path
-            except FileExistsError:
-                continue
+            except BaseException:
+                _unlink_quietly(str(path))           # ours, and short: no half-written screenshot
+                raise
+            return path
         raise FileExistsError(errno.EEXIST, "every name is taken", str(first))
     finally:
         _unlink_quietly(tmp)
