@@ -206,7 +206,10 @@ float pixelCoverage(int k) {
     vec2 lo = min(min(c00, c01), min(c10, c11)), hi = max(max(c00, c01), max(c10, c11));
     vec2 span = hi - lo;
     bool ok = k >= 0 && span.x * span.y <= float(MAX_PIXEL_CORNERS) && span.x + span.y <= float(MAX_PIXEL_LINES);
-    ivec2 n = ok ? ivec2(span) : ivec2(0);          // 0 trips where not needed
+    // 0 trips where not needed; clamped as well, so the trip count is bounded
+    // even where a driver's comparisons let a NaN through (GLSL leaves NaN
+    // undefined, and a GPU has no loop limit to stop a runaway loop)
+    ivec2 n = ok ? ivec2(clamp(span, 0.0, float(MAX_PIXEL_LINES))) : ivec2(0);
     float o00 = mod(lo.x + lo.y, 2.0);               // parity of cell (0, 0); cell (a, b): o00 + a + b
     float f = o00;
     for (int b = 1; b <= n.y; ++b) {
@@ -245,7 +248,8 @@ float rowCoverage(int k, float v) {
     vec2 c0 = cellOf(vec2(0.0, v), off, size), c1 = cellOf(vec2(1.0, v), off, size);
     vec2 dir = sign(c1 - c0);
     bool ok = k >= 0 && abs(c1.x - c0.x) + abs(c1.y - c0.y) <= float(MAX_ROW_CROSSINGS);
-    ivec2 nc = ok ? ivec2(abs(c1 - c0)) : ivec2(0);   // 0 trips past the limit
+    // 0 trips past the limit, and bounded as in pixelCoverage
+    ivec2 nc = ok ? ivec2(clamp(abs(c1 - c0), 0.0, float(MAX_ROW_CROSSINGS))) : ivec2(0);
     // the j-th line crossed along an axis (j = 0, 1, ...) is at the cell
     // boundary c0 + 1 + j going up, c0 - j going down
     vec2 first = (c0 + max(dir, 0.0)) * size - off;
