@@ -382,3 +382,13 @@ def test_an_abbreviated_vector_option_takes_a_leading_minus_like_the_full_name()
     assert e.value.code == 2
     # a value that is an option is not swallowed
     assert normalise_argv(["render", "--camera-pos", "--debug"])[-2:] == ["--camera-pos", "--debug"]
+
+
+def test_a_reader_that_goes_away_ends_it_quietly():
+    # `glassray stress --list | head -1`: the pipe's reader is gone before
+    # the listing is written; it printed "glassray: BrokenPipeError: ..."
+    p = subprocess.Popen([sys.executable, "-m", "viewer", "stress", "--list"],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    p.stdout.close()                     # long before the child has imported what it needs
+    _, err = p.communicate(timeout=120)
+    assert err.decode() == "" and p.returncode == 1

@@ -494,6 +494,18 @@ COMMANDS = {"view": cmd_view, "render": cmd_render, "check": cmd_check,
             "bench": cmd_module, "stress": cmd_module}
 
 
+def _quiet_stdout() -> None:
+    try:
+        fd = sys.stdout.fileno()
+    except (AttributeError, OSError, ValueError):
+        return                       # not a file (a test's capture): nothing left to flush into a pipe
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, fd)
+    finally:
+        os.close(devnull)
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     parser = build_parser()
@@ -521,6 +533,12 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("glassray: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:
+        # the reader of stdout went away (`glassray stress --list | head -1`):
+        # stop quietly, as the tools around it do; stdout goes to /dev/null so
+        # the interpreter's final flush does not report the pipe again
+        _quiet_stdout()
+        return 1
     except (Failure, ShaderError, SkyImageError) as e:
         if args.debug:
             raise
