@@ -639,7 +639,9 @@ vec3 radiance(vec3 origin, vec3 dir) {
     if (resumeFirst == 0) {
         uvec4 st = texelFetch(resumeIn, ivec2(gl_FragCoord.xy), 0);
         if (st.w == 0u) return sum;                     // done in an earlier pass
-        for (int level = 0; level < int(st.z); ++level) {
+        // (st.z, a depth - 1, is below STACK_SIZE: the min only bounds the
+        // loop whatever the texture holds)
+        for (int level = 0; level < int(min(st.z, uint(STACK_SIZE))); ++level) {
             vec3 again = vec3(0.0);
             Branch reflected, refracted, a, b;
             walkNode(br, again, reflected, refracted);

@@ -206,10 +206,12 @@ float pixelCoverage(int k) {
     vec2 lo = min(min(c00, c01), min(c10, c11)), hi = max(max(c00, c01), max(c10, c11));
     vec2 span = hi - lo;
     bool ok = k >= 0 && span.x * span.y <= float(MAX_PIXEL_CORNERS) && span.x + span.y <= float(MAX_PIXEL_LINES);
-    // 0 trips where not needed; clamped as well, so the trip count is bounded
-    // even where a driver's comparisons let a NaN through (GLSL leaves NaN
-    // undefined, and a GPU has no loop limit to stop a runaway loop)
-    ivec2 n = ok ? ivec2(clamp(span, 0.0, float(MAX_PIXEL_LINES))) : ivec2(0);
+    // 0 trips where not needed; clamped as well, after the conversion (an
+    // integer clamp is exact: int() of a NaN or of a float out of int's
+    // range is undefined, and so is a float clamp of a NaN), so the trip
+    // count is bounded even where a driver's comparisons let a NaN through
+    // (GLSL leaves NaN undefined, and a GPU has no loop limit)
+    ivec2 n = ok ? clamp(ivec2(span), 0, MAX_PIXEL_LINES) : ivec2(0);
     float o00 = mod(lo.x + lo.y, 2.0);               // parity of cell (0, 0); cell (a, b): o00 + a + b
     float f = o00;
     for (int b = 1; b <= n.y; ++b) {
@@ -249,7 +251,7 @@ float rowCoverage(int k, float v) {
     vec2 dir = sign(c1 - c0);
     bool ok = k >= 0 && abs(c1.x - c0.x) + abs(c1.y - c0.y) <= float(MAX_ROW_CROSSINGS);
     // 0 trips past the limit, and bounded as in pixelCoverage
-    ivec2 nc = ok ? ivec2(clamp(abs(c1 - c0), 0.0, float(MAX_ROW_CROSSINGS))) : ivec2(0);
+    ivec2 nc = ok ? clamp(ivec2(abs(c1 - c0)), 0, MAX_ROW_CROSSINGS) : ivec2(0);
     // the j-th line crossed along an axis (j = 0, 1, ...) is at the cell
     // boundary c0 + 1 + j going up, c0 - j going down
     vec2 first = (c0 + max(dir, 0.0)) * size - off;
@@ -309,7 +311,9 @@ void setFootprintPixel(vec2 ij) {
 #ifndef FOOTPRINT_DIRECT_ONLY
     if (code < -0.5) {
         int e = int(-code + 0.5) - 1;
-        ivec2 at = ivec2(3 * (e % chainEntriesPerRow), e / chainEntriesPerRow);
+        // (an unset uniform is 0: integer division by 0 is undefined)
+        int perRow = max(chainEntriesPerRow, 1);
+        ivec2 at = ivec2(3 * (e % perRow), e / perRow);
         vec4 t0 = texelFetch(footprintChain, at, 0);
         vec4 t1 = texelFetch(footprintChain, at + ivec2(1, 0), 0);
         vec4 t2 = texelFetch(footprintChain, at + ivec2(2, 0), 0);
