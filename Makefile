@@ -7,8 +7,10 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 APT_PACKAGES := libegl1 libegl-mesa0 libgl1-mesa-dri libosmesa6 xvfb xdotool
 # Wanted, not needed: libLLVM >= 16 lets the physically based peer (Mitsuba 3,
-# viewer/peer.py) run its fast llvm_ad_rgb variant instead of scalar_rgb.
-OPTIONAL_APT := libllvm19
+# viewer/peer.py) run its fast llvm_ad_rgb variant instead of scalar_rgb;
+# glslangValidator (glslang-tools) lets tests/test_glsl_portability.py check
+# every shader program against the GLSL spec (skipped without it).
+OPTIONAL_APT := libllvm19 glslang-tools
 
 .PHONY: run test system-deps venv clean
 
@@ -32,7 +34,7 @@ system-deps:
 	  if command -v apt-get >/dev/null 2>&1 && [ "$$(id -u)" = 0 ]; then \
 	    { DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $$p >/dev/null 2>&1 \
 	      || { apt-get update -qq >/dev/null 2>&1 && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $$p >/dev/null 2>&1; }; } \
-	      || echo "note: optional package $$p not installed (the Mitsuba peer falls back to scalar_rgb)"; fi; \
+	      || echo "note: optional package $$p not installed (see OPTIONAL_APT in the Makefile)"; fi; \
 	done
 
 $(PY):
