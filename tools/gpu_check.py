@@ -39,6 +39,7 @@ import moderngl
 import numpy as np
 
 from viewer.context import create_offscreen_context, describe
+from viewer.imageio import linear_to_srgb
 from viewer.renderer import Renderer
 from viewer.scene import builtin_scene_names, load_scene
 
@@ -48,11 +49,6 @@ SAMPLES = 4
 MAX_SHARE = 0.002
 WATCHDOG = 20
 NAMES = ("default", "bench-opaque", "glass-sphere", "bench-many", "whitted-glass", "coloured-liquid")
-
-
-def display(img: np.ndarray) -> np.ndarray:
-    x = np.clip(img, 0.0, 1.0)
-    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
 
 
 def scenes() -> list[str]:
@@ -161,7 +157,7 @@ def main(argv: list[str]) -> int:
         for name, img in render_all(ctx).items():
             other = np.load(d / f"{name}.npy")
             rmse = float(np.sqrt(np.mean((img.astype(np.float64) - other) ** 2)))
-            diff = np.abs(display(img) - display(other)).max(axis=-1)
+            diff = np.abs(linear_to_srgb(img) - linear_to_srgb(other)).max(axis=-1)
             share = float(np.mean(diff > 1 / 255))
             worst = np.unravel_index(np.argmax(diff), diff.shape)
             ok = share <= MAX_SHARE and np.isfinite(img).all()
