@@ -406,7 +406,7 @@ def reference_image(scene, stem: str, width: int, height: int, samples: int, cac
     else:
         from .renderer import Renderer
 
-        r = Renderer(ctx, ref_scene)
+        r = Renderer(ctx, ref_scene, eager=False)
         try:
             img = r.render(width, height, samples, REFERENCE_SEED).astype(np.float64)
         finally:
@@ -497,7 +497,7 @@ class _Renderers:
         variant = (setting.specialise, setting.fresnel, size)
         r = self._by_variant.get(variant)
         if r is None:
-            r = Renderer(self.ctx, s, specialise=setting.specialise, fresnel=setting.fresnel)
+            r = Renderer(self.ctx, s, specialise=setting.specialise, fresnel=setting.fresnel, eager=False)
             r.SUBSET_PROGRAMS = self.SUBSET_PROGRAMS
             self._by_variant[variant] = r
         elif self._current.get(variant) != setting.key():

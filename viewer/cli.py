@@ -351,7 +351,7 @@ def cmd_render(args) -> int:
             raise
     samples = scene.render.samples
     try:
-        renderer = Renderer(ctx, scene)
+        renderer = Renderer(ctx, scene, eager=False)     # compiles what its draws use
     except BaseException:
         ctx.release()
         raise

@@ -918,7 +918,7 @@ def run_bench(args, ctx, backend: str, name: str, scene, width: int, height: int
 
     from .adaptive import DEFAULT_TARGET_ERROR, render_adaptive
 
-    renderer = Renderer(ctx, scene)
+    renderer = Renderer(ctx, scene, eager=False)
     renderer.SUBSET_PROGRAMS = bench._Renderers.SUBSET_PROGRAMS   # keep every culling variant compiled
     series: dict[str, list[Point]] = {"glassray": [], "mitsuba": []}
 

@@ -48,12 +48,23 @@ class Renderer:
     SUBSET_PROGRAMS = 16
 
     def __init__(self, ctx: moderngl.Context, scene: Scene, tile: int = DEFAULT_TILE,
-                 specialise: bool = True, fresnel: str = "exact", extra_defines: dict | None = None):
+                 specialise: bool = True, fresnel: str = "exact", extra_defines: dict | None = None,
+                 eager: bool = True):
         """specialise=False uses the generic all-features shader and
         fresnel="schlick" Schlick's approximation: both only for comparisons
         in the benchmark.  extra_defines are added to every program (the
-        stress suite's NAIVE_INTERSECT)."""
+        stress suite's NAIVE_INTERSECT).
+
+        eager: set_scene compiles the scene's full program at once, so that
+        a shader the driver rejects fails there (the viewer keeps its last
+        good scene and shaders).  eager=False compiles each program when a
+        draw first needs it: render() of a glass scene, or of one with
+        footprint samples, draws only variants of it (cut-checked, with
+        footprints, culled), so the full one would be compiled for nothing
+        (bench-many's: 3.5 s on llvmpipe, 15 s on an NVIDIA driver, with
+        the driver's shader cache cold)."""
         self.ctx = ctx
+        self.eager = eager
         self.tile = tile
         self.specialise = specialise
         self.fresnel = fresnel
@@ -81,6 +92,8 @@ class Renderer:
         #: program it builds later comes from them (F5 makes a new renderer)
         self.shader_files = ShaderFiles()
         self.scene: Scene | None = None
+        #: what draw_sample draws with: None is the scene's full program
+        #: (culled where culls()); _debug_pass swaps in a VIEW_MODE variant
         self.program: moderngl.Program | None = None
         self.set_scene(scene)
 
@@ -97,7 +110,8 @@ class Renderer:
         scene, self.length_exponent = gpu_frame_scene(scene)
         packed = pack_scene(scene, self.specialise, self.fresnel)
         self._defines = {**packed.defines, **self.extra_defines}
-        self.program = self._main = self._program(self._defines)
+        if self.eager:
+            self._program(self._defines)
         self._plan_key, self._plans = None, {}
         if self._ubo is None or self._ubo.size != len(packed.block):
             if self._ubo is not None:
@@ -107,6 +121,11 @@ class Renderer:
             self._ubo.write(packed.block)
         self._update_sky(scene)
         self.scene = scene
+
+    @property
+    def _main(self) -> moderngl.Program:
+        """The scene's full program (compiled now if it is not yet)."""
+        return self._program(self._defines)
 
     @staticmethod
     def _program_key(defines: dict, vertex: str = "fullscreen.vert") -> tuple:
@@ -151,9 +170,6 @@ class Renderer:
             self._sky.release()
         self._sky, self._sky_path = tex, key
 
-    def _vao(self) -> moderngl.VertexArray:
-        return self.vao_of(self.program)
-
     # ------------------------------------------------------------ drawing
 
     def draw_sample(self, width: int, height: int, offset: tuple[float, float],
@@ -167,12 +183,13 @@ class Renderer:
         camera moves: a compile on llvmpipe takes up to a second): a group
         whose variant is not ready is drawn with a ready variant for more
         objects, or with the full shader."""
-        if self.program is self._main and self.culls():
+        if self.program is None and self.culls():
             self.draw_groups(self._culled(width, height, compile=compile), width, height, offset, viewport)
             return
-        self.bind(self.program, width, height, offset)
+        prog = self._main if self.program is None else self.program
+        self.bind(prog, width, height, offset)
         self.ctx.scissor = viewport
-        self._vao().render(moderngl.TRIANGLES, vertices=3)
+        self.vao_of(prog).render(moderngl.TRIANGLES, vertices=3)
         self.ctx.scissor = None
 
     def draw_groups(self, groups, width: int, height: int, offset: tuple[float, float],
