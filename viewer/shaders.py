@@ -3,9 +3,16 @@
 
 The GLSL lives in the top-level ``shaders/`` folder, shipped inside the wheel
 as the resource package ``viewer.shaders``.  ``#include "lib/x.glsl"`` is
-resolved relative to the including file; each piece is preceded by a
-``#line N FILE`` directive (FILE is an integer in GLSL 330), so the
-compiler's ``0:12(3): error`` can be mapped back to ``lib/x.glsl:12``.
+resolved relative to the including file, and ``#line`` directives let a
+compiler's ``0:12(3): error`` be mapped back to ``lib/x.glsl:12:3``.
+
+The file is encoded in the line number itself (file k's line n is numbered
+(k + 1) * LINE_BASE + n), not only in ``#line``'s source-string number:
+Mesa honours the line of ``#line N S`` but prints source string 0 in every
+message.  And since a ``#line`` inside a branch the preprocessor skips is
+skipped too (trace.frag's ``#ifdef FOOTPRINT_AA`` around an include), the
+numbering is set again after every ``#include``, ``#else``, ``#elif`` and
+``#endif``: whichever branch was taken, the next line has its own number.
 """
 
 from __future__ import annotations
@@ -18,6 +25,10 @@ from importlib import resources
 from pathlib import Path
 
 _INCLUDE = re.compile(r'^\s*#\s*include\s+"([^"]+)"\s*$')
+_BRANCH = re.compile(r"^\s*#\s*(?:else|elif|endif)\b")
+#: Line numbers of file k (load_source's Source.files[k]) start at
+#: (k + 1) * LINE_BASE; smaller ones are the injected #version and #defines.
+LINE_BASE = 100000
 _VERSION = re.compile(r"^\s*#\s*version\b")
 
 
@@ -97,7 +108,10 @@ def load_source(name: str, defines: dict[str, object] | None = None, root: Path 
             raise ShaderError(f"{rel}: cannot read shader{where}: {e.strerror or e}") from None
         index = len(files)
         files.append(rel)
-        out.append(f"#line 1 {index}")
+
+        def line_directive(n: int) -> str:       # the next line is this file's line n
+            return f"#line {(index + 1) * LINE_BASE + n} {index}"
+        out.append(line_directive(1))
         for lineno, line in enumerate(text.splitlines(), start=1):
             if _VERSION.match(line):
                 if stack or version_line:
@@ -109,9 +123,11 @@ def load_source(name: str, defines: dict[str, object] | None = None, root: Path 
             if m:
                 inc = str((Path(rel).parent / m.group(1)).as_posix())
                 emit(inc, stack + (rel,))
-                out.append(f"#line {lineno + 1} {index}")
+                out.append(line_directive(lineno + 1))
                 continue
             out.append(line)
+            if _BRANCH.match(line):
+                out.append(line_directive(lineno + 1))
 
     emit(name, ())
     header = version_line[0] if version_line else "#version 330 core"
@@ -126,13 +142,19 @@ _LOCATION = re.compile(r"(?P<file>\d+)(?::|\()(?P<line>\d+)\)?(?:\((?P<col>\d+)\
 
 
 def explain_compile_error(message: str, files: list[str]) -> str:
-    """Rewrite file indices in a driver's log into shader file names."""
+    """Rewrite the locations in a driver's log as file:line[:column] of the
+    shader files (load_source's Source.files), decoded from the line number
+    (see LINE_BASE); a line of the injected header reads "<#defines>:N"."""
     lines = []
     for raw in str(message).splitlines():
         m = _LOCATION.search(raw)
-        if m and int(m.group("file")) < len(files):
-            where = f"{files[int(m.group('file'))]}:{m.group('line')}"
-            raw = raw[: m.start()] + where + raw[m.end():]
+        if m:
+            k, n = divmod(int(m.group("line")), LINE_BASE)
+            if k <= len(files):
+                where = f"{files[k - 1] if k else '<#defines>'}:{n}"
+                if m.group("col"):
+                    where += f":{m.group('col')}"
+                raw = raw[: m.start()] + where + raw[m.end():]
         lines.append(raw)
     return "\n".join(lines)
 
@@ -143,9 +165,11 @@ def build_program(ctx, fragment: str = "trace.frag", vertex: str = "fullscreen.v
     """Compile and link; raise ShaderError with file:line locations."""
     vs = load_source(vertex, None, root, sources)
     fs = load_source(fragment, defines, root, sources)
+    import moderngl
+
     try:
         return ctx.program(vertex_shader=vs.text, fragment_shader=fs.text)
-    except Exception as e:  # moderngl raises moderngl.Error with the driver's log
+    except moderngl.Error as e:  # the driver's log; anything else is no shader's fault
         msg = str(e)
         files = fs.files if "fragment" in msg.lower() or "vertex" not in msg.lower() else vs.files
         raise ShaderError(f"shader compilation failed:\n{explain_compile_error(msg, files)}") from None
