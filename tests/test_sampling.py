@@ -82,3 +82,13 @@ def test_seeds_give_nearly_independent_estimates_of_an_edge():
                 corr.append(np.corrcoef(err[0::2], err[1::2])[0, 1])
     assert abs(np.mean(corr)) < 0.1
     assert np.mean(mse[64]) < np.mean(mse[16]) / 4 / 1.5      # better than Monte Carlo's 1/n
+
+
+def test_offsets_are_a_fresh_copy_each_call():
+    # the pattern is cached (a timed render asks for it every frame); a
+    # caller that edits its copy must not change anyone else's
+    from viewer.sampling import progressive_offsets, sample_offsets
+
+    first = sample_offsets(4, 3)
+    first[:] = -1.0
+    assert np.array_equal(sample_offsets(4, 3), progressive_offsets(4, 3))
