@@ -81,6 +81,8 @@ def test_missing_include_and_cycle_are_named(shaders):
     ("0:100741(5): error: x", "trace.frag:741:5: error"),
     ("0:3(9): error: syntax error", "<#defines>:3:9: error"),      # the injected header
     ("0:900001(1): error: x", "0:900001(1): error: x"),            # no such file: left as it is
+    ("0:100007(2): error: vec4(1:2) is no 3:4", "trace.frag:7:2: error: vec4(1:2) is no 3:4"),
+    ("note: see 1:100003 above", "note: see 1:100003 above"),      # not a leading location
 ])
 def test_driver_logs_are_mapped_to_file_names(log, want):
     assert want in explain_compile_error(log, ["trace.frag", "lib/optics.glsl"])

@@ -138,7 +138,10 @@ def load_source(name: str, defines: dict[str, object] | None = None, root: Path 
 
 
 # Mesa: "0:12(3): error: ..."; NVIDIA: "0(12) : error ..."; ANGLE/others: "ERROR: 0:12: ..."
-_LOCATION = re.compile(r"(?P<file>\d+)(?::|\()(?P<line>\d+)\)?(?:\((?P<col>\d+)\))?")
+# The location leads its line (after ERROR: / WARNING:), so that a pair of
+# numbers inside a message is left alone.
+_LOCATION = re.compile(r"^(?P<pre>\s*(?:(?:ERROR|WARNING):\s*)?)(?P<file>\d+)(?::|\()(?P<line>\d+)\)?"
+                       r"(?:\((?P<col>\d+)\))?")
 
 
 def explain_compile_error(message: str, files: list[str]) -> str:
@@ -147,14 +150,14 @@ def explain_compile_error(message: str, files: list[str]) -> str:
     (see LINE_BASE); a line of the injected header reads "<#defines>:N"."""
     lines = []
     for raw in str(message).splitlines():
-        m = _LOCATION.search(raw)
+        m = _LOCATION.match(raw)
         if m:
             k, n = divmod(int(m.group("line")), LINE_BASE)
             if k <= len(files):
                 where = f"{files[k - 1] if k else '<#defines>'}:{n}"
                 if m.group("col"):
                     where += f":{m.group('col')}"
-                raw = raw[: m.start()] + where + raw[m.end():]
+                raw = m.group("pre") + where + raw[m.end():]
         lines.append(raw)
     return "\n".join(lines)
 
