@@ -56,7 +56,7 @@ def render(gl):
     made = []
 
     def _render(scene, w=96, h=54, samples=1, seed=0):
-        r = Renderer(gl, scene)
+        r = Renderer(gl, scene, eager=False)    # as `glassray render`: compiles what it draws
         made.append(r)
         return r.render(w, h, samples, seed)
 
