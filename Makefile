@@ -42,6 +42,7 @@ $(PY):
 	$(PY) -m pip install -q --upgrade pip
 
 $(STAMP): pyproject.toml | $(PY)
+	$(PY) -m pip install -q --upgrade 'setuptools>=77' wheel   # the build-system's, for the offline wheel test
 	$(PY) -m pip install -q -e '.[test]'
 	@touch $@
 

@@ -2,7 +2,7 @@
 ``#define`` injection, and error messages that name the file and line.
 
 The GLSL lives in the top-level ``shaders/`` folder, shipped inside the wheel
-as the resource package ``viewer.shaders``.  ``#include "lib/x.glsl"`` is
+as the folder ``viewer/glsl/``.  ``#include "lib/x.glsl"`` is
 resolved relative to the including file, and ``#line`` directives let a
 compiler's ``0:12(3): error`` be mapped back to ``lib/x.glsl:12:3``.
 
@@ -45,13 +45,13 @@ def shader_root() -> Path:
     if override:
         return Path(override)
     try:
-        root = resources.files("viewer.shaders")
-        p = Path(str(root))
+        # an installed wheel: the folder viewer/glsl/ (pyproject.toml)
+        p = Path(str(resources.files("viewer").joinpath("glsl")))
         if (p / "trace.frag").is_file():
             return p
     except (ModuleNotFoundError, TypeError):
         pass
-    return Path(__file__).resolve().parent.parent / "shaders"
+    return Path(__file__).resolve().parent.parent / "shaders"      # the repository (editable install)
 
 
 class ShaderFiles:
