@@ -6,6 +6,7 @@ version pyproject.toml's build-system asks for)."""
 
 from __future__ import annotations
 
+import os
 import re
 import shutil
 import subprocess
@@ -90,7 +91,7 @@ print(" ".join(sc.builtin_scene_names()))
 from viewer import cli
 sys.exit(cli.main(["render", "default", "-o", {str(out)!r}, "--size", "40x24", "--samples", "1"]))
 """
-    env = {k: v for k, v in __import__("os").environ.items() if k != "GLASSRAY_SHADERS"}
+    env = {k: v for k, v in os.environ.items() if k != "GLASSRAY_SHADERS"}
     done = subprocess.run([sys.executable, "-c", script], cwd=tmp_path, env=env,
                           capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
