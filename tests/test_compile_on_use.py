@@ -45,6 +45,10 @@ def compiled_and_bound(monkeypatch):
     ("bench-opaque", 1, []),     # the plain program, culled: it is drawn, so it is built
     ("default", 2, ["--adaptive"]),
     ("default", 1, ["--view", "normals"]),
+    # at 160x90 no group of bench-opaque's tiles meets every object: the
+    # full program (plain, or with footprints) is drawn nowhere
+    ("bench-opaque", 1, ["--size", "160x90"]),
+    ("bench-opaque", 2, ["--size", "160x90"]),
 ])
 def test_render_builds_only_programs_it_draws(tmp_path, compiled_and_bound, scene, samples, extra):
     built, bound = compiled_and_bound

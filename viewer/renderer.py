@@ -252,13 +252,15 @@ class Renderer:
         # the fewest objects that holds all of its own (exact there too: it
         # only tests more objects), or else the scene's full shader, which
         # is exact everywhere.
-        full = self.variant(**extra) if extra else self._main
+        def full() -> moderngl.Program:   # only when a group draws with it: none may
+            return self.variant(**extra) if extra else self._main
         everything = tuple(range(len(self.scene.objects)))
         budget = len(self._plan_groups) if compile_all else (self.COMPILES_PER_DRAW if compile else 0)
         compiled, complete, progs = 0, True, []
         for subset, rects in self._plan_groups:
-            prog = full
-            if subset != everything:
+            if subset == everything:
+                prog = full()
+            else:
                 defines = {**shader_defines(self.scene, True, self.fresnel, subset), **self.extra_defines, **extra}
                 k = self._program_key(defines)
                 if k in self._subset_programs or compiled < budget:
@@ -266,7 +268,7 @@ class Renderer:
                     prog = self._subset_program(k, defines, subset, extra_key, keep=[p for p, _ in progs])
                 else:
                     complete = False
-                    prog = self._ready_superset(subset, extra_key) or full
+                    prog = self._ready_superset(subset, extra_key) or full()
             progs.append((prog, rects))
         if complete:
             self._plans[extra_key] = progs
