@@ -116,8 +116,38 @@ def test_bad_usage_exits_2_with_one_message(tmp_path, args):
     r = glassray(*args, cwd=tmp_path)
     assert r.returncode == 2, (r.stdout, r.stderr)
     assert "Traceback" not in r.stderr
-    assert r.stderr.strip()
+    assert len(r.stderr.strip().splitlines()) == 1, r.stderr     # cli.md: one clear message
     assert not (tmp_path / "x.png").exists()
+
+
+def test_a_usage_error_is_one_line_that_says_where_the_usage_is(tmp_path):
+    # argparse printed render's nine-line usage block before the error
+    r = glassray("render", "-o", "x.png", "--samples", "0", cwd=tmp_path)
+    assert r.returncode == 2
+    assert r.stderr.splitlines() == ["glassray render: error: argument --samples: expected an integer in "
+                                     "1..65536, got 0 (see 'glassray render --help')"]
+
+
+def test_without_a_scene_the_shipped_default_is_used_whatever_the_folder_holds(tmp_path):
+    # cli.md: "without one, the built-in default scene is used"; a file or a
+    # folder named `default` in the current folder took its place
+    import tomllib
+    from importlib import resources
+
+    shipped = tomllib.loads((resources.files("viewer.scenes") / "default.toml").read_text())
+    want = f"{len(shipped['objects'])} objects"
+    (tmp_path / "with-file").mkdir()
+    (tmp_path / "with-file" / "default").write_text('[sky]\ntype = "color"\ncolor = [0.25, 0.5, 1.0]\n')
+    (tmp_path / "with-folder" / "default").mkdir(parents=True)
+    for cwd in (tmp_path / "with-file", tmp_path / "with-folder"):
+        r = glassray("check", cwd=cwd)
+        assert r.returncode == 0 and want in r.stdout, (cwd, r.stdout, r.stderr)
+    r = glassray("render", "-o", "x.npy", "--size", "8x4", "--samples", "1", cwd=tmp_path / "with-file")
+    assert r.returncode == 0, r.stderr
+    assert not np.allclose(np.load(tmp_path / "with-file" / "x.npy"), [0.25, 0.5, 1.0])
+    # named, the file in the folder is what is read (a path as given)
+    r = glassray("check", "default", cwd=tmp_path / "with-file")
+    assert r.returncode == 0 and "0 objects" in r.stdout, r.stdout
 
 
 @pytest.mark.parametrize("args, says", [

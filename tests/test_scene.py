@@ -778,6 +778,35 @@ def test_keys_of_other_sky_types_are_accepted_and_ignored(tmp_path, text):
     assert s.sky.image_path is None
 
 
+@pytest.mark.parametrize("text, kept", [
+    ('type = "color"\ncolor = [1, 0, 0]\nhorizon = [-1, 0, 0]\nzenith = "x"\n', {"color": (1, 0, 0)}),
+    ('type = "color"\ncolor = [1, 0, 0]\nimage = 5\n', {"color": (1, 0, 0)}),
+    ('type = "gradient"\nhorizon = [1, 1, 0]\ncolor = [-1, 0, 0]\nimage = ["a"]\n', {"horizon": (1, 1, 0)}),
+    ('color = "red"\nzenith = [0, 0, 1]\n', {"zenith": (0, 0, 1)}),             # gradient by default
+], ids=["color-with-bad-gradient-keys", "color-with-image-not-a-path", "gradient-with-bad-others",
+        "default-type-with-bad-color"])
+def test_invalid_keys_of_other_sky_types_are_ignored_too(tmp_path, text, kept):
+    # "accepted and ignored": a value another sky type would reject is no
+    # error here; it is dropped for the default (the spec's defaults, by hand)
+    defaults = {"color": (0.6, 0.7, 0.9), "horizon": (0.8, 0.85, 0.9), "zenith": (0.25, 0.4, 0.75)}
+    s = load_text(tmp_path, "[sky]\n" + text)
+    for key, default in defaults.items():
+        assert getattr(s.sky, key) == pytest.approx(kept.get(key, default)), key
+    assert s.sky.image is None
+
+
+@pytest.mark.parametrize("text, key", [
+    ('type = "color"\ncolor = [-1, 0, 0]\nhorizon = [1, 1, 1]\n', "sky.color"),
+    ('type = "gradient"\nhorizon = [-1, 0, 0]\n', "sky.horizon"),
+    ('zenith = "blue"\n', "sky.zenith"),
+    ('type = "image"\nimage = 5\n', "sky.image"),
+])
+def test_invalid_keys_of_the_active_sky_type_are_errors(tmp_path, text, key):
+    with pytest.raises(SceneError) as err:
+        load_text(tmp_path, "[sky]\n" + text)
+    assert _names_key(str(err.value), key), str(err.value)
+
+
 def test_image_sky_keeps_the_other_keys_too(tmp_path, monkeypatch):
     env = tmp_path / "env"
     env.mkdir()

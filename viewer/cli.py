@@ -113,10 +113,19 @@ def _add_overrides(p: argparse.ArgumentParser) -> None:
     g.add_argument("--light-position", type=_vec3, metavar="x,y,z", help="moves the first point light")
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse, with a usage error as one line on stderr (cli.md: "one
+    clear message") instead of the usage block before it, which for render
+    is nine lines that hide the error; the line says where the usage is."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
     from .adaptive import DEFAULT_TARGET_ERROR     # (no GL: the module creates no context)
 
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="glassray",
         description="A real-time Whitted ray tracer: a rod in a glass of liquid, traced in a fragment shader.",
         epilog="Without a subcommand, 'view' is run. See 'glassray SUBCOMMAND --help'.")

@@ -380,11 +380,23 @@ def _sky(ctx: _Ctx, t: dict, base_dir: Path | None) -> Sky:
     s = Sky()
     if "type" in t:
         s.type = _str(ctx, "sky.type", t["type"], ("color", "gradient", "image"))
+    # the spec: "Keys of the other sky types are accepted and ignored" -- so
+    # only the active type's keys are validated; another type's are kept (the
+    # panel switches type, a saved scene writes them) where they are valid,
+    # and otherwise dropped for their defaults, never an error
+    active = {"color": ("color",), "gradient": ("horizon", "zenith"), "image": ("image",)}[s.type]
     for key in ("color", "horizon", "zenith"):
         if key in t:
-            setattr(s, key, _color(ctx, f"sky.{key}", t[key]))
+            try:
+                setattr(s, key, _color(ctx, f"sky.{key}", t[key]))
+            except SceneError:
+                if key in active:
+                    raise
     if "image" in t:
-        s.image = _str(ctx, "sky.image", t["image"])
+        if "image" in active:
+            s.image = _str(ctx, "sky.image", t["image"])
+        elif isinstance(t["image"], str):
+            s.image = t["image"]
     if s.type == "image":
         if s.image is None:
             raise ctx.fail("sky.image", "required when sky.type is \"image\"")
@@ -598,9 +610,11 @@ def builtin_scene_names() -> list[str]:
 
 
 def resolve_scene_path(spec: str | os.PathLike | None) -> Path:
-    """A path as given, or the name of a scene shipped with the package."""
+    """A path as given, or the name of a scene shipped with the package;
+    None is the shipped default scene, whatever the current folder holds
+    (a file or folder there named ``default`` is read only when named)."""
     if spec is None:
-        spec = DEFAULT_SCENE_NAME
+        return Path(str(resources.files(SCENES_PACKAGE) / f"{DEFAULT_SCENE_NAME}.toml"))
     p = Path(spec)
     if p.exists() or p.suffix == ".toml" or os.sep in str(spec):
         return p
