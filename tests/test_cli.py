@@ -226,6 +226,33 @@ def test_the_progress_bar_waits_for_a_long_render_and_is_erased(monkeypatch):
             assert out == ""
 
 
+def test_the_progress_bar_is_drawn_at_most_ten_times_a_second(monkeypatch):
+    # a render calls back after every tile: 1000 calls in 2 s must not be
+    # 1000 lines of terminal text (a 4 s render wrote about 75 KB)
+    import io
+
+    from viewer import cli
+
+    class Tty(io.StringIO):
+        def isatty(self):
+            return True
+
+    clock = [100.0]
+    monkeypatch.setattr(cli.time, "perf_counter", lambda: clock[0])
+    err = Tty()
+    monkeypatch.setattr(cli.sys, "stderr", err)
+    show = cli._progress_bar("render 8x8")
+    for done in range(1000):
+        show(done, 1000)
+        clock[0] += 0.002 + 0.5 * (done == 0)    # past PROGRESS_AFTER_S, then 2 ms a tile
+    draws = err.getvalue().count("\r")
+    assert 10 <= draws <= 1 + 2.0 / cli.PROGRESS_EVERY_S + 1, draws
+    last = float(err.getvalue().rsplit("\r", 1)[1].split("]")[1].split("%")[0])
+    assert last >= 90.0, last                    # it still follows the render to its end
+    show(1000, 1000)
+    assert err.getvalue().endswith("\r")
+
+
 def test_the_progress_bar_starts_over_when_render_draws_again_in_passes(monkeypatch):
     # render() reports the count going back when a cut tree makes it draw the
     # image again: the bar is labelled so and its estimate uses its own clock

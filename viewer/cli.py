@@ -249,6 +249,10 @@ def _load(args) -> "object":
 
 #: A render shows its progress bar once it has taken this long.
 PROGRESS_AFTER_S = 0.5
+#: and draws it again at most this often: a render calls back after every
+#: tile, hundreds of times a second, and each redraw is a line of text (a
+#: 4-second render wrote about 75 KB to the terminal)
+PROGRESS_EVERY_S = 0.1
 
 
 def _progress_bar(label: str, again: str | None = None):
@@ -264,21 +268,25 @@ def _progress_bar(label: str, again: str | None = None):
     shown = [0]                               # width of the line drawn (0: none)
     last = [0]
     name = [label]
+    drawn_at = [-float("inf")]
 
     def show(done: int, total: int) -> None:
-        if done < last[0]:
+        restart = done < last[0]
+        if restart:
             start[0] = time.perf_counter()
             name[0] = again or label
         last[0] = done
         frac = done / total
-        elapsed = time.perf_counter() - start[0]
+        now = time.perf_counter()
+        elapsed = now - start[0]
         if done >= total:
             if shown[0]:
                 sys.stderr.write("\r" + " " * shown[0] + "\r")
                 sys.stderr.flush()
             return
-        if elapsed < PROGRESS_AFTER_S:
+        if elapsed < PROGRESS_AFTER_S or (now - drawn_at[0] < PROGRESS_EVERY_S and not restart):
             return
+        drawn_at[0] = now
         bar = "#" * int(30 * frac)
         eta = elapsed / frac - elapsed if frac > 0 else 0.0
         line = f"{name[0]} [{bar:<30}] {100 * frac:5.1f}%  {elapsed:5.1f}s  eta {eta:5.1f}s"
