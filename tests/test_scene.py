@@ -1379,3 +1379,22 @@ def test_saving_through_a_symbolic_link_replaces_the_file_it_points_to(tmp_path)
     assert link.is_symlink() and os.readlink(link) == str(real)
     assert load_scene(real).name == s.name
     assert sorted(os.listdir(real_dir)) == ["scene.toml"] and sorted(os.listdir(tmp_path)) == ["linked.toml", "real"]
+
+
+@pytest.mark.parametrize("text, says", [
+    ("[camera]\nfov = 0.5\n", "camera.fov: expected a number in 1..179, got 0.5"),    # below: the whole range
+    ("[camera]\nfov = 200\n", "camera.fov: expected a number in 1..179, got 200"),    # above: the same words
+    ("[render]\nexposure = 0\n", "render.exposure: expected a number > 0, got 0"),
+])
+def test_a_value_out_of_range_is_told_the_whole_range(tmp_path, text, says):
+    # (it used to name only the bound broken: "expected a number >= 1")
+    with pytest.raises(SceneError, match=re.escape(says)):
+        load_text(tmp_path, text)
+
+
+def test_range_text_of_open_and_half_open_ranges():
+    from viewer.scene import _range_text
+
+    assert _range_text(0, 1, True, False) == "> 0 and <= 1"
+    assert _range_text(0, 1, False, True) == ">= 0 and < 1"
+    assert _range_text(None, 5, False, False) == "<= 5"

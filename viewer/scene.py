@@ -280,11 +280,19 @@ def _float(ctx: _Ctx, path: str, v: Any, *, lo: float | None = None, hi: float |
         raise ctx.fail(path, "expected a finite number, got an integer too large for a float") from None
     if not math.isfinite(x):
         raise ctx.fail(path, f"expected a finite number, got {v}")
-    if lo is not None and (x <= lo if lo_open else x < lo):
-        raise ctx.fail(path, f"expected a number {'>' if lo_open else '>='} {lo:g}, got {v}")
-    if hi is not None and (x >= hi if hi_open else x > hi):
-        raise ctx.fail(path, f"expected a number {'<' if hi_open else '<='} {hi:g}, got {v}")
+    if (lo is not None and (x <= lo if lo_open else x < lo)) or (hi is not None and (x >= hi if hi_open else x > hi)):
+        raise ctx.fail(path, f"expected a number {_range_text(lo, hi, lo_open, hi_open)}, got {v}")
     return x
+
+
+def _range_text(lo: float | None, hi: float | None, lo_open: bool, hi_open: bool) -> str:
+    """The whole allowed range, not only the bound a value broke: "in 1..179",
+    "> 0 and <= 1", ">= 0"."""
+    if lo is not None and hi is not None and not (lo_open or hi_open):
+        return f"in {lo:g}..{hi:g}"
+    parts = ([f"{'>' if lo_open else '>='} {lo:g}"] if lo is not None else []) + \
+            ([f"{'<' if hi_open else '<='} {hi:g}"] if hi is not None else [])
+    return " and ".join(parts)
 
 
 def _int(ctx: _Ctx, path: str, v: Any, lo: int, hi: int) -> int:
