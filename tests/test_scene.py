@@ -1398,3 +1398,12 @@ def test_range_text_of_open_and_half_open_ranges():
     assert _range_text(0, 1, True, False) == "> 0 and <= 1"
     assert _range_text(0, 1, False, True) == ">= 0 and < 1"
     assert _range_text(None, 5, False, False) == "<= 5"
+
+
+def test_a_sky_picture_that_is_not_one_is_said_so_plainly(tmp_path):
+    (tmp_path / "sky.jpg").write_bytes(b"not a picture at all")
+    with pytest.raises(SceneError) as err:
+        load_text(tmp_path, '[sky]\ntype = "image"\nimage = "sky.jpg"\n')
+    msg = str(err.value)
+    assert _names_key(msg, "sky.image") and "cannot decode it: not a JPG picture" in msg, msg
+    assert "Error" not in msg and msg.count("sky.jpg") == 1, msg      # no class name, the file named once

@@ -130,6 +130,11 @@ def read_sky_image(path: str | Path) -> np.ndarray:
     except ImageReadError:
         raise
     except (OSError, ValueError, SyntaxError, MemoryError) as e:   # PIL's errors for a bad file
+        from PIL import UnidentifiedImageError
+
+        if isinstance(e, UnidentifiedImageError):    # its text names the file again, and its class
+            raise ImageReadError(f"cannot decode it: not a {path.suffix.lstrip('.').upper()} picture "
+                                 "(or a kind of one Pillow cannot read)") from None
         raise ImageReadError(f"cannot decode it ({type(e).__name__}: {e})") from None
     bad = ~np.isfinite(img) | (img < 0)
     if bad.any():
