@@ -326,6 +326,24 @@ def test_panel_camera_edits_are_followed(ctl):
 # ---------------------------------------------------------------- reload, help, screenshots
 
 
+def test_a_camera_edit_keeps_the_values_not_touched_exactly(ctl):
+    # the panel sets scene.camera and calls camera_edited(); the orbit camera
+    # rebuilt from it gave position 4.6000000000000005 back for 4.6
+    ctl.scene.camera.position, ctl.scene.camera.target = (3.2, 2.2, 4.6), (0.0, 0.9, 0.0)
+    ctl.camera_edited()
+    ctl.scene.camera.fov = 30.0                # only fov edited
+    ctl.camera_edited()
+    assert ctl.scene.camera.position == (3.2, 2.2, 4.6)
+    assert ctl.scene.camera.target == (0.0, 0.9, 0.0) and ctl.camera.fov == 30.0
+    ctl.scene.camera.target = (0.0, 1.5, 0.0)  # only the target edited
+    ctl.camera_edited()
+    assert ctl.scene.camera.position == (3.2, 2.2, 4.6)
+    assert np.allclose(ctl.camera.position, (3.2, 2.2, 4.6), rtol=1e-12)   # the orbit camera follows
+    ctl.scene.camera.target = (3.2, 2.2, 4.6)  # position == target: not taken, put back
+    ctl.camera_edited()
+    assert ctl.scene.camera.target != ctl.scene.camera.position
+
+
 def test_reload_takes_what_changed_on_disk_and_keeps_the_rest(ctl):
     import copy
 

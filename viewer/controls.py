@@ -131,8 +131,12 @@ class Controls:
         try:
             self.camera = OrbitCamera.look_at(c.position, c.target, c.fov, self._limits)
         except ValueError:  # position == target: keep the orbit camera, put it back
-            pass
-        self._sync_scene_camera()
+            self._sync_scene_camera()
+            return
+        # the scene keeps the values as edited: the orbit camera's position,
+        # rebuilt from angles and a distance, can differ in the last bit
+        # (editing only fov turned 4.6 into 4.6000000000000005 in a saved scene)
+        self.changed = True
 
     # ------------------------------------------------------------ mouse
 
