@@ -194,6 +194,28 @@ def test_the_hud_shows_no_glyph_the_font_lacks(ui, monkeypatch):
     assert not any("\u2026" in s or not s.isascii() for s in shown), shown
 
 
+def test_a_long_hud_message_is_wrapped_inside_the_window(ui):
+    # a failed F5's message was one line cut at the window's edge: at 320 px
+    # only "reload failed, keeping the last good scene:" could be read
+    from viewer import ui as ui_module
+
+    message = ("reload failed, keeping the last good scene: /tmp/scene.toml: objects[0].radius: "
+               "expected a number > 0, got -1")
+    heights = {}
+    for w, h in ((320, 180), (2000, 600)):
+        ui.display_size = imgui.ImVec2(w, h)
+        for _ in range(3):
+            imgui.new_frame()
+            ui_module.draw_hud(["1.0 ms  60 fps", f"{w}x{h}"], message)
+            imgui.render()
+        x0, y0, x1, y1 = ui_module.hud_rect
+        assert 0 <= x0 < x1 <= w - ui_module.HUD_MARGIN + 1, (w, ui_module.hud_rect)
+        heights[w] = y1 - y0
+    # all of it is there: one line at 2000 px, three at 320 (the window's
+    # 308 px hold about 44 characters of its 122)
+    assert heights[320] >= heights[2000] + 2 * imgui.get_text_line_height(), heights
+
+
 def test_the_help_stays_in_a_window_resized_while_it_is_open(ui):
     """The help was centred only when it opened: a window made smaller
     while it was open left it partly outside."""

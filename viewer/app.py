@@ -892,19 +892,22 @@ class Viewer:
             fbw, fbh = glfw.get_framebuffer_size(self.window)
             if self.debug_res != (fbw, fbh) or self.debug_dirty:
                 self._debug_frame(time.perf_counter(), fbw, fbh, force_full=True)
-            try:
-                path = save_rgb8(self.debug_pic)
-            except OSError as e:
-                self._say(f"screenshot not saved: {e.strerror or e}", error=True)
-                return
-            print(os.path.abspath(path), flush=True)
-            self._say(f"saved {path.name}")
+            self._save_screenshot(save_rgb8, self.debug_pic)
             return
         self.prog.finish_pass()
+        self._save_screenshot(save_linear, self.prog.image())
+
+    def _save_screenshot(self, save, pixels) -> None:
+        """Save under the next free name in the current folder; the path on
+        stdout, or what went wrong, and in which folder, on stderr and the HUD."""
         try:
-            path = save_linear(self.prog.image())
+            path = save(pixels)
         except OSError as e:
-            self._say(f"screenshot not saved: {e.strerror or e}", error=True)
+            try:
+                folder = os.getcwd()
+            except OSError:             # the folder the viewer runs in was removed
+                folder = "the current folder, which no longer exists"
+            self._say(f"screenshot not saved in {folder}: {e.strerror or e}", error=True)
             return
         print(os.path.abspath(path), flush=True)
         self._say(f"saved {path.name}")
@@ -912,13 +915,7 @@ class Viewer:
     def _window_screenshot(self, fbw: int, fbh: int) -> None:
         raw = self.ctx.screen.read(viewport=(0, 0, fbw, fbh), components=3, alignment=1)
         rgb = np.frombuffer(raw, dtype=np.uint8).reshape(fbh, fbw, 3)[::-1]
-        try:
-            path = save_rgb8(rgb)
-        except OSError as e:
-            self._say(f"screenshot not saved: {e.strerror or e}", error=True)
-            return
-        print(os.path.abspath(path), flush=True)
-        self._say(f"saved {path.name}")
+        self._save_screenshot(save_rgb8, rgb)
 
     # ------------------------------------------------------------ soak (debug)
 

@@ -652,14 +652,27 @@ def draw_hud(lines: list[str], message: str = "") -> None:
     flags = (imgui.WindowFlags_.no_decoration | imgui.WindowFlags_.always_auto_resize
              | imgui.WindowFlags_.no_saved_settings | imgui.WindowFlags_.no_focus_on_appearing
              | imgui.WindowFlags_.no_nav | imgui.WindowFlags_.no_inputs | imgui.WindowFlags_.no_move)
-    imgui.set_next_window_pos(imgui.ImVec2(6.0, 6.0), imgui.Cond_.always)
+    imgui.set_next_window_pos(imgui.ImVec2(HUD_MARGIN, HUD_MARGIN), imgui.Cond_.always)
     imgui.set_next_window_bg_alpha(0.55)
     imgui.begin("##hud", None, flags)
+    # a message can be long (a failed F5 names the file, the key and what was
+    # expected): wrapped 6 px inside the window's right edge, not cut there
+    width = imgui.get_io().display_size.x
+    imgui.push_text_wrap_pos(max(HUD_MIN_WRAP, width - 2 * HUD_MARGIN - imgui.get_style().window_padding.x))
     for line in lines:
         imgui.text(_plain(line))  # "max error ...: measuring…" showed "measuring?"
     if message:
         imgui.text_colored(imgui.ImVec4(1.0, 0.8, 0.3, 1.0), _plain(message))
+    imgui.pop_text_wrap_pos()
+    global hud_rect
+    pos, size = imgui.get_window_pos(), imgui.get_window_size()
+    hud_rect = (pos.x, pos.y, pos.x + size.x, pos.y + size.y)
     imgui.end()
+
+
+HUD_MARGIN = 6.0      # the HUD's distance from the window's edges
+HUD_MIN_WRAP = 120.0  # narrower windows cut the text instead of wrapping every word
+hud_rect = (0.0, 0.0, 0.0, 0.0)  # where the HUD was last drawn: x0, y0, x1, y1 (tests)
 
 
 def _plain(text: str) -> str:
