@@ -32,19 +32,19 @@ from contextlib import contextmanager
 
 _depth = 0
 _pipe: tuple[int, int] | None = None
-_seen = False
 
 
-def _record(signum, frame) -> None:      # the Python-level handler: remember, raise at check()
-    global _seen
-    _seen = True
+def _record(signum, frame) -> None:
+    """The Python-level handler: nothing to do.  The C-level one already
+    wrote the signal to the wakeup pipe, which check() reads; this one runs
+    later, in the main thread, and a flag set here as well counted the same
+    Ctrl-C twice when check() read the pipe before it ran ("interrupted"
+    printed twice: once by the command, once when deferred() ended)."""
 
 
 def _take() -> bool:
     """Whether a SIGINT came (consuming it)."""
-    global _seen
-    came = _seen
-    _seen = False
+    came = False
     if _pipe is not None:
         try:
             while data := os.read(_pipe[0], 64):
