@@ -7,6 +7,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import os
 import re
 import subprocess
 import sys
@@ -641,14 +642,14 @@ def test_bench_unwritable_result_names_the_file_and_keeps_the_tables(monkeypatch
 
     import viewer.scene
 
-    real = viewer.scene.write_atomic
+    real = viewer.scene._write_temp      # what every atomic write writes through
 
-    def full_disk(path, data):
-        if Path(path).name == "results.md":
+    def full_disk(folder, name, data, mode):
+        if name == "results.md":
             raise OSError(errno.ENOSPC, "No space left on device")
-        return real(path, data)
+        return real(folder, name, data, mode)
 
-    monkeypatch.setattr(viewer.scene, "write_atomic", full_disk)
+    monkeypatch.setattr(viewer.scene, "_write_temp", full_disk)
     p = argparse.ArgumentParser()
     bench.add_arguments(p)
     p.add_argument("--debug", action="store_true")
@@ -665,3 +666,115 @@ def test_peer_time_limit_without_peer_is_bad_usage(tmp_path):
                   "--out", str(tmp_path / "o"))
     assert proc.returncode == 2 and "--peer-time-limit" in proc.stderr and "needs --peer" in proc.stderr
     assert not (tmp_path / "o").exists()
+
+
+# ---------------------------------------------------------------- outputs (audit, 2026-12-04)
+
+
+def _files(folder):
+    return {p.name: p.read_bytes() for p in sorted(folder.iterdir()) if p.is_file()}
+
+
+def test_a_run_that_cannot_write_one_file_leaves_the_earlier_runs_files_all_as_they_were(tmp_path, monkeypatch,
+                                                                                         capsys):
+    # results.csv and results.md used to be the new run's while machine.json
+    # and the plots stayed the old run's (the exit status said 1)
+    from viewer import cli, scene as scene_module
+
+    out = tmp_path / "out"
+    assert _bench("bench-opaque", "--quick", "--size", "8x8", "--repeat", "1", "--out", str(out)).returncode == 0
+    before = _files(out)
+    assert {"results.csv", "results.md", "machine.json"} <= set(before)
+    real = os.access
+    blocked = out / "machine.json"       # read-only as a plain open() would find it (root passes os.access)
+    monkeypatch.setattr(scene_module.os, "access", lambda p, mode: False if Path(p) == blocked else real(p, mode))
+    assert cli.main(["bench", "glass-sphere", "--quick", "--size", "12x6", "--repeat", "1", "--out", str(out)]) == 1
+    assert "machine.json: cannot write" in capsys.readouterr().err
+    after = _files(out)
+    added = set(after) - set(before)       # the new scene's reference, cached as soon as it is computed
+    assert len(added) == 1 and added.pop().startswith("ref-glass-sphere-")
+    assert {k: after[k] for k in before} == before                  # every result file, byte for byte
+    assert not [p for p in out.iterdir() if p.name.endswith(".tmp")]
+
+
+def test_files_written_together_are_all_or_nothing(tmp_path):
+    from viewer import bench
+
+    (tmp_path / "a").write_bytes(b"old a")
+    (tmp_path / "stale").write_bytes(b"old plot")
+    with pytest.raises(RuntimeError):
+        with bench.results_written_together():
+            bench.write_output(tmp_path / "a", b"new a")
+            bench.write_output(tmp_path / "b", b"new b")
+            assert bench.remove_stale([tmp_path / "stale"]) == [tmp_path / "stale"]
+            raise RuntimeError("the run fails before its end")
+    assert _files(tmp_path) == {"a": b"old a", "stale": b"old plot"}
+    with bench.results_written_together():
+        bench.write_output(tmp_path / "a", b"new a")
+        bench.write_output(tmp_path / "b", b"new b")
+        bench.remove_stale([tmp_path / "stale"])
+        visible = {k: v for k, v in _files(tmp_path).items() if not k.endswith(".tmp")}
+        assert visible == {"a": b"old a", "stale": b"old plot"}              # nothing until the end
+    assert _files(tmp_path) == {"a": b"new a", "b": b"new b"}
+
+
+@pytest.mark.parametrize("args, says", [
+    (["", "--quick"], "empty scene name"),
+    (["--scenes", "", "--quick"], "--scenes names no scene"),
+])
+def test_an_empty_scene_name_is_bad_usage(tmp_path, args, says):
+    # both used to benchmark the four default scenes
+    proc = _bench(*args, "--size", "8x8", "--repeat", "1", "--out", str(tmp_path / "o"))
+    assert proc.returncode == 2 and says in proc.stderr, proc.stderr
+    assert not (tmp_path / "o").exists()
+
+
+def test_one_scene_file_named_twice_in_other_words_is_bad_usage(tmp_path):
+    from viewer.scene import resolve_scene_path
+
+    path = resolve_scene_path("glass-sphere")
+    proc = _bench("--scenes", f"glass-sphere,{path}", "--quick", "--size", "8x8", "--repeat", "1",
+                  "--out", str(tmp_path / "o"))
+    assert proc.returncode == 2 and f"{path} (the same file as glass-sphere) more than once" in proc.stderr
+
+
+def test_out_keeps_a_users_file_of_any_name_and_is_not_made_under_a_missing_folder(tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / ".write-test").write_text("user data")         # the name the write check used to take
+    assert _bench("bench-opaque", "--quick", "--size", "8x8", "--repeat", "1", "--out", str(out)).returncode == 0
+    assert (out / ".write-test").read_text() == "user data"
+    proc = _bench("bench-opaque", "--quick", "--size", "8x8", "--repeat", "1",
+                  "--out", str(tmp_path / "typo" / "deeper" / "out"))
+    assert proc.returncode == 1 and "typo/deeper does not exist" in proc.stderr, proc.stderr
+    assert not (tmp_path / "typo").exists()
+
+
+def test_a_run_that_fails_leaves_no_empty_folder_of_its_own(tmp_path):
+    env = dict(os.environ, __EGL_VENDOR_LIBRARY_FILENAMES=str(tmp_path / "none.json"))
+    proc = subprocess.run([sys.executable, "-m", "viewer", "bench", "bench-opaque", "--quick", "--size", "8x8",
+                           "--backend", "egl", "--out", str(tmp_path / "o")],
+                          capture_output=True, text=True, timeout=120, env=env)
+    assert proc.returncode == 1, proc.stderr
+    assert not (tmp_path / "o").exists()
+
+
+def test_settings_left_out_for_a_small_reference_are_named(tmp_path):
+    proc = _bench("bench-opaque", "--size", "8x8", "--repeat", "1", "--reference-samples", "8",
+                  "--out", str(tmp_path / "o"))
+    assert proc.returncode == 0, proc.stderr
+    line = next(x for x in proc.stderr.splitlines() if "left out" in x)
+    assert "8-sample reference" in line
+    for label in ("samples=8", "samples=32", "samples=64"):
+        assert label in line
+    assert "samples=4," not in line and "samples=4 " not in line      # 4 < 8: measured
+
+
+def test_the_table_gives_min_and_max_to_a_tenth_of_a_millisecond():
+    # rounded to whole milliseconds, 5.6 | 6..7 looked as if the range missed its median
+    st = bench.Setting("default", 8, 16, 1e-3)
+    res = bench.Result("s", st, 4, 4, times=[5.5236, 5.6, 6.54], cpu_times=[5.6] * 3,
+                       errors={"rmse": 0.1, "frac_off": 0.0, "max_abs": 0.1})
+    bench.mark_fronts([res])
+    row = [c.strip() for c in bench.scene_table([res], "s").splitlines()[4].split("|")[1:-1]]
+    assert row[8:10] == ["5.6", "5.5..6.5"], row

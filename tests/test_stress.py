@@ -124,6 +124,13 @@ def test_unknown_case_is_bad_usage():
     assert r.returncode == 2 and "no-such-case" in r.stderr and "Traceback" not in r.stderr
 
 
+def test_a_case_named_twice_is_bad_usage(tmp_path):
+    # it ran and reported the case twice ("2 of 2 cases")
+    r = _stress("--case", "axis-x", "--case", "axis-x", "--out", tmp_path / "res")
+    assert r.returncode == 2 and "--case names axis-x more than once" in r.stderr, r.stderr
+    assert not (tmp_path / "res").exists()
+
+
 def test_exit_status_1_when_a_case_exceeds_its_tolerance(monkeypatch, tmp_path, capsys):
     # the same case with an impossible tolerance (negative) must fail the run
     strict = stress.Case("axis-x-strict", "axis-x with a negative tolerance", stress.get_case("axis-x").build,
@@ -173,14 +180,16 @@ def test_unwritable_out_is_found_before_the_cases_run(monkeypatch, tmp_path, cap
     import errno
     from pathlib import Path
 
-    real = Path.write_bytes
+    from viewer import bench
 
-    def read_only(self, data):
-        if self.parent == tmp_path / "res":
+    real = bench.tempfile.mkstemp      # the write check's probe file
+
+    def read_only(*a, dir=None, **kw):
+        if Path(dir) == tmp_path / "res":
             raise OSError(errno.EROFS, "Read-only file system")
-        return real(self, data)
+        return real(*a, dir=dir, **kw)
 
-    monkeypatch.setattr(Path, "write_bytes", read_only)
+    monkeypatch.setattr(bench.tempfile, "mkstemp", read_only)
     monkeypatch.setattr(stress.Suite, "run_case", lambda *a: pytest.fail("a case ran before the folder was checked"))
     assert stress.run(_args(tmp_path)) == 1
     assert "cannot write results there: Read-only file system" in capsys.readouterr().err
@@ -191,10 +200,10 @@ def test_full_disk_names_the_file(monkeypatch, tmp_path, capsys):
 
     import viewer.scene
 
-    def full_disk(path, data):
+    def full_disk(folder, name, data, mode):     # what every atomic write writes through
         raise OSError(errno.ENOSPC, "No space left on device")
 
-    monkeypatch.setattr(viewer.scene, "write_atomic", full_disk)
+    monkeypatch.setattr(viewer.scene, "_write_temp", full_disk)
     assert stress.run(_args(tmp_path)) == 1
     cap = capsys.readouterr()
     assert "res/contact-sheet.png: cannot write: No space left on device" in cap.err

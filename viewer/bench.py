@@ -70,6 +70,7 @@ matplotlib: ``pip install glassray[bench]``).  The same tables go to stdout.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import csv
 import datetime as _dt
 import hashlib
@@ -80,6 +81,7 @@ import os
 import platform
 import statistics
 import sys
+import tempfile
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -707,7 +709,7 @@ def scene_table(results: list[Result], title: str, clock: str = "wall") -> str:
         rows.append((st.label, f"{res.width}x{res.height}", str(st.max_depth), str(st.samples),
                      str(st.samples) if st.adaptive is None else f"{res.spp_used:.2f}",
                      _fmt_w(st.min_weight), "spec" if st.specialise else "generic", st.fresnel,
-                     f"{res.time_ms:.1f}", f"{min(res.times):.0f}..{max(res.times):.0f}", f"{res.cpu_ms:.0f}",
+                     f"{res.time_ms:.1f}", f"{min(res.times):.1f}..{max(res.times):.1f}", f"{res.cpu_ms:.0f}",
                      f"{res.errors['rmse']:.2e}", f"{100 * res.errors['frac_off']:.2f}%",
                      f"{res.errors['max_abs']:.3f}",
                      "**" if res.front["wall"] and res.front["cpu"] else ("w" if res.front["wall"] else
@@ -981,26 +983,63 @@ class OutputError(Exception):
     """An output file could not be written (the message names it)."""
 
 
+#: the set of files being written together (results_written_together), if any
+_writing: "AtomicSet | None" = None
+
+
 def write_output(path: Path, data: bytes) -> None:
-    """write_atomic, with an OSError (a full disk, a read-only folder)
-    turned into an OutputError that names the file: the OSError of a failed
-    write names at most the temporary file, and often nothing."""
+    """write_atomic (or, inside results_written_together, a part of its
+    set), with an OSError (a full disk, a read-only folder) turned into an
+    OutputError that names the file: the OSError of a failed write names at
+    most the temporary file, and often nothing."""
     from .scene import write_atomic
 
     try:
-        write_atomic(path, data)
+        if _writing is not None:
+            _writing.write(path, data)
+        else:
+            write_atomic(path, data)
     except OSError as e:
         raise OutputError(f"{path}: cannot write: {e.strerror or e}") from e
+
+
+@contextlib.contextmanager
+def results_written_together():
+    """A run's result files as one set: every write_output and remove_stale
+    inside is done at the end, all of them, or none if anything inside
+    fails (a second run into the same folder that cannot write one of its
+    files leaves the first run's files, all of them, as they were)."""
+    from .scene import AtomicSet
+
+    global _writing
+    outer, _writing = _writing, AtomicSet()
+    files = _writing
+    try:
+        yield
+    except BaseException:
+        files.discard()
+        raise
+    finally:
+        _writing = outer
+    try:
+        files.commit()
+    except OSError as e:
+        raise OutputError(f"{e.filename or 'a result file'}: cannot write: {e.strerror or e}") from e
 
 
 def results_folder_problem(out: Path) -> str | None:
     """Why results cannot be written into the folder `out` (made if
     missing), or None: checked before a run, not found after it."""
+    if out.exists() and not out.is_dir():
+        return f"{out}: cannot write results there: it is a file, not a folder"
+    if not out.parent.is_dir():      # as render's output: a mistyped path is not made
+        what = "is a file, not a folder" if out.parent.exists() else "does not exist"
+        return f"{out}: cannot write results there: folder {out.parent} {what}"
     try:
-        out.mkdir(parents=True, exist_ok=True)
-        probe = out / ".write-test"
-        probe.write_bytes(b"")
-        probe.unlink()
+        out.mkdir(exist_ok=True)
+        fd, probe = tempfile.mkstemp(prefix=".glassray-write-test-", dir=out)   # a name no file has
+        os.close(fd)
+        os.unlink(probe)
     except OSError as e:
         return f"{out}: cannot write results there: {e.strerror or e}"
     return None
@@ -1011,6 +1050,9 @@ def remove_stale(paths: list[Path]) -> list[Path]:
     would pass for this run's); returns those removed."""
     stale = [p for p in paths if p.is_file()]
     for p in stale:
+        if _writing is not None:        # with the set's other files, at its end
+            _writing.remove(p)
+            continue
         try:
             p.unlink()
         except OSError as e:
@@ -1035,6 +1077,22 @@ def _unique_stems(names: list[str]) -> list[str] | None:
     return stems
 
 
+def _named_twice(names: list[str]) -> list[str]:
+    """The scenes of `names` that name one file twice, however spelt
+    (glass-sphere and glass-sphere; a/s.toml and /abs/a/s.toml): each
+    spelling after the first of its file."""
+    from .scene import resolve_scene_path
+
+    seen, twice = {}, []
+    for name in names:
+        key = os.path.realpath(resolve_scene_path(name))
+        if key in seen:
+            twice.append(name if name == seen[key] else f"{name} (the same file as {seen[key]})")
+        else:
+            seen[key] = name
+    return twice
+
+
 def run(args) -> int:
     from .scene import SceneError, builtin_scene_names, load_scene
 
@@ -1049,14 +1107,17 @@ def run(args) -> int:
     if not peer and getattr(args, "peer_time_limit", None) is not None:
         print("glassray bench: --peer-time-limit limits the peer's renders; it needs --peer", file=sys.stderr)
         return 2
+    if args.scene is not None and not args.scene.strip():
+        print("glassray bench: empty scene name (give a scene file or a built-in scene name)", file=sys.stderr)
+        return 2
     names = [args.scene] if args.scene else (
-        [s.strip() for s in args.scenes.split(",") if s.strip()] if args.scenes else
+        [s.strip() for s in args.scenes.split(",") if s.strip()] if args.scenes is not None else
         (["whitted-exact"] if peer else list(DEFAULT_SCENES)))
     if not names:
         print("glassray bench: --scenes names no scene", file=sys.stderr)
         return 2
-    if _unique_stems(names) is None:
-        twice = sorted({n for n in names if names.count(n) > 1})
+    twice = _named_twice(names)
+    if twice:
         print(f"glassray bench: --scenes names {', '.join(twice)} more than once", file=sys.stderr)
         return 2
     if not str(args.out):
@@ -1082,11 +1143,28 @@ def run(args) -> int:
     width, height = args.size
     ref_samples = args.reference_samples or (QUICK_REFERENCE_SAMPLES if args.quick else DEFAULT_REFERENCE_SAMPLES)
     out = Path(args.out)
+    made = not out.exists()
     problem = results_folder_problem(out)
     if problem:
         print(f"glassray: {problem}", file=sys.stderr)
         return 1
+    try:
+        return _run_into(args, peer, scenes, width, height, ref_samples, out, debug)
+    finally:
+        if made:
+            remove_if_empty(out)      # a run that wrote nothing leaves no folder of its own behind
 
+
+def remove_if_empty(folder: Path) -> None:
+    """Remove `folder` if it is empty (results_folder_problem made it, and
+    the run failed before writing anything into it)."""
+    try:
+        folder.rmdir()                # fails on a folder with anything in it
+    except OSError:
+        pass
+
+
+def _run_into(args, peer, scenes, width, height, ref_samples, out: Path, debug: bool) -> int:
     from .context import ContextError, create_offscreen_context
 
     try:
@@ -1165,6 +1243,10 @@ def _run(args, ctx, backend, scenes, width, height, ref_samples, out: Path) -> i
         if stem != _stem(name, scene):
             _log(f"{name}: called {stem} in the results (another scene has the same name)")
         settings = sweep(scene, quick=args.quick, reference_samples=ref_samples)
+        dropped = [x.label for x in sweep(scene, quick=args.quick) if x not in settings]
+        if dropped:
+            _log(f"{stem}: left out, as they take as many samples as the {ref_samples}-sample reference or "
+                 f"more (they would measure its noise): {', '.join(dropped)}")
         from .gpu_scene import GENERIC_LENS
 
         if (len(scene.objects) > GENERIC_LENS["OBJECTS_LEN"] or len(scene.materials) > GENERIC_LENS["MATERIALS_LEN"]
@@ -1215,19 +1297,22 @@ def _run(args, ctx, backend, scenes, width, height, ref_samples, out: Path) -> i
     # the tables first: a run's results are not lost if its files cannot be written (a full disk)
     print(text, end="", flush=True)
     print()
-    write_csv(out / "results.csv", all_results)
-    write_output(out / "results.md", text.encode("utf-8"))
-    write_output(out / "machine.json", (json.dumps(info, indent=2) + "\n").encode("utf-8"))
     subtitle = (f"glassray bench, {width}x{height}, {info['gl'].split(' / ')[0]}, {info['cpus_usable']} CPUs; "
                 f"reference {ref_samples}{f'/{refine}' if refine else ''} spp ({kind}); {info['date'][:10]}")
-    plotted = (plot(out / "pareto.png", by_scene, titles, subtitle + "; wall-clock frame time", "wall")
-               and plot(out / "pareto-cpu.png", by_scene, titles, subtitle + "; CPU time of all threads", "cpu"))
+    stale = []
+    with results_written_together():
+        write_csv(out / "results.csv", all_results)
+        write_output(out / "results.md", text.encode("utf-8"))
+        write_output(out / "machine.json", (json.dumps(info, indent=2) + "\n").encode("utf-8"))
+        plotted = (plot(out / "pareto.png", by_scene, titles, subtitle + "; wall-clock frame time", "wall")
+                   and plot(out / "pareto-cpu.png", by_scene, titles, subtitle + "; CPU time of all threads", "cpu"))
+        if not plotted:
+            stale = remove_stale([out / "pareto.png", out / "pareto-cpu.png"])
 
     print(f"wrote {out / 'results.csv'}, {out / 'results.md'}, {out / 'machine.json'}"
           + (f", {out / 'pareto.png'}, {out / 'pareto-cpu.png'}" if plotted else ""))
     if not plotted:
         print("no plot: pareto.png needs matplotlib (pip install 'glassray[bench]')")
-        stale = remove_stale([out / "pareto.png", out / "pareto-cpu.png"])
         if stale:
             print(f"removed the plots of an earlier run: {', '.join(str(p) for p in stale)}")
     return 0

@@ -1044,7 +1044,7 @@ def run_bench(args, ctx, backend: str, name: str, scene, width: int, height: int
                         "cpu_ms": f"{p.cpu_ms:.4f}", "repeat": len(p.times), "rmse": f"{p.errors['rmse']:.10g}",
                         "frac_off_1_255": f"{p.errors['frac_off']:.6g}",
                         "max_abs_err": f"{p.errors['max_abs']:.6g}"})
-    write_output(out / "peer.csv", buf.getvalue().encode("utf-8"))
+    peer_csv = buf.getvalue().encode("utf-8")
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=TTE_CSV_COLUMNS, lineterminator="\n")
     w.writeheader()
@@ -1058,20 +1058,25 @@ def run_bench(args, ctx, backend: str, name: str, scene, width: int, height: int
                         "ratio_mitsuba_over_glassray": num(r[0]),
                         "glassray_adaptive_ms": num(ta[0]) if ta else "",
                         "ratio_mitsuba_over_adaptive": num(ra[0]) if ra else ""})
-    write_output(out / "peer-time-to-error.csv", buf.getvalue().encode("utf-8"))
-    write_output(out / "peer.md", text.encode("utf-8"))
-    write_output(out / "peer-machine.json", (json.dumps(info, indent=2) + "\n").encode("utf-8"))
-    plotted = _plot(out / "peer.png", series, TARGET_ERRORS,
-                    f"glassray vs Mitsuba {info['peer']['mitsuba']} ({peer.variant}, {peer.threads} threads), "
-                    f"{stem} {width}x{height}, {info['cpus_usable']} CPUs, reference {ref_samples}"
-                    f"{f'/{refined}' if refined else ''} spp; "
-                    f"{info['date'][:10]}")
+    stale = []
+    with bench.results_written_together():      # all of them, or none
+        write_output(out / "peer.csv", peer_csv)
+        write_output(out / "peer-time-to-error.csv", buf.getvalue().encode("utf-8"))
+        write_output(out / "peer.md", text.encode("utf-8"))
+        write_output(out / "peer-machine.json", (json.dumps(info, indent=2) + "\n").encode("utf-8"))
+        plotted = _plot(out / "peer.png", series, TARGET_ERRORS,
+                        f"glassray vs Mitsuba {info['peer']['mitsuba']} ({peer.variant}, {peer.threads} threads), "
+                        f"{stem} {width}x{height}, {info['cpus_usable']} CPUs, reference {ref_samples}"
+                        f"{f'/{refined}' if refined else ''} spp; "
+                        f"{info['date'][:10]}")
+        if not plotted:
+            stale = bench.remove_stale([out / "peer.png"])
     print(text, end="")
     print()
     print(f"wrote {out / 'peer.md'}, {out / 'peer.csv'}, {out / 'peer-time-to-error.csv'}, "
           f"{out / 'peer-machine.json'}" + (f", {out / 'peer.png'}" if plotted else ""))
     if not plotted:
         print("no plot: peer.png needs matplotlib (pip install 'glassray[bench]')")
-        if bench.remove_stale([out / "peer.png"]):
+        if stale:
             print(f"removed the plot of an earlier run: {out / 'peer.png'}")
     return 0

@@ -865,6 +865,18 @@ def write_atomic(path: Path, data: bytes) -> None:
     failed write never leaves a half-written or destroyed file.  A symbolic
     link is followed: the file it points to is replaced and the link kept,
     as a plain open() for writing would."""
+    tmp, path = _stage(path, data)
+    try:
+        os.replace(tmp, path)
+    except BaseException:
+        _unlink_quietly(tmp)
+        raise
+
+
+def _stage(path: Path, data: bytes) -> tuple[str, Path]:
+    """`data` in full in a temporary file beside `path` (its link's target,
+    for a symbolic link), checked as a plain open() for writing would check
+    `path`; (the temporary file, the path to rename it to)."""
     path = Path(path)
     if path.is_symlink():
         path = Path(os.path.realpath(path))
@@ -876,12 +888,46 @@ def write_atomic(path: Path, data: bytes) -> None:
         mode = path.stat().st_mode & 0o7777      # the existing file's, as open() keeps it
     except OSError:
         mode = _new_file_mode()
-    tmp = _write_temp(path.parent, path.name, data, mode)
-    try:
-        os.replace(tmp, path)
-    except BaseException:
-        _unlink_quietly(tmp)
-        raise
+    return _write_temp(path.parent, path.name, data, mode), path
+
+
+class AtomicSet:
+    """Files written as one set (a benchmark's CSV, tables and plots): each
+    is written in full beside its name first, and only when every one is
+    are they renamed into place, and the files to remove removed.  An error
+    before that (a full disk, a read-only file among them, Ctrl-C) leaves
+    every file as it was, never some of one run and some of another.  (The
+    renames themselves could still fail part way: they do not allocate,
+    so only a folder changed under the run can make them fail.)"""
+
+    def __init__(self) -> None:
+        self._staged: list[tuple[str, Path]] = []
+        self._removals: list[Path] = []
+
+    def write(self, path: Path, data: bytes) -> None:
+        self._staged.append(_stage(path, data))
+
+    def remove(self, path: Path) -> None:
+        self._removals.append(Path(path))
+
+    def commit(self) -> None:
+        staged, self._staged = self._staged, []
+        try:
+            while staged:
+                tmp, path = staged[0]
+                os.replace(tmp, path)
+                staged.pop(0)
+        finally:
+            for tmp, _ in staged:
+                _unlink_quietly(tmp)
+        removals, self._removals = self._removals, []
+        for path in removals:
+            path.unlink(missing_ok=True)
+
+    def discard(self) -> None:
+        for tmp, _ in self._staged:
+            _unlink_quietly(tmp)
+        self._staged, self._removals = [], []
 
 
 def write_new(paths, data: bytes) -> Path:

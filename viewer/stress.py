@@ -952,16 +952,30 @@ def run(args) -> int:
     if unknown:
         print(f"glassray stress: unknown case {', '.join(map(repr, unknown))} (see --list)", file=sys.stderr)
         return 2
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:       # it ran and reported such a case twice
+        print(f"glassray stress: --case names {', '.join(twice)} more than once", file=sys.stderr)
+        return 2
     if not str(args.out):
         print("glassray stress: --out names no folder", file=sys.stderr)
         return 2
     out = Path(args.out)
-    from .bench import OutputError, results_folder_problem
+    from .bench import remove_if_empty, results_folder_problem
 
+    made = not out.exists()
     problem = results_folder_problem(out)     # before the cases run, not after them
     if problem:
         print(f"glassray: {problem}", file=sys.stderr)
         return 1
+    try:
+        return _run_cases(args, names, out)
+    finally:
+        if made:
+            remove_if_empty(out)      # a run that wrote nothing leaves no folder of its own behind
+
+
+def _run_cases(args, names: list[str], out: Path) -> int:
+    from .bench import OutputError
     from .context import ContextError, create_offscreen_context, describe
 
     try:
@@ -997,13 +1011,14 @@ def run(args) -> int:
             _print("\nfloat32 relative error of t, first hit against the float64 reference:")
             _print(format_errors(stats, markdown=False))
             md += "\n" + format_errors(stats) + "\n"
-        from .bench import write_output     # an OSError becomes a message naming the file
+        from .bench import results_written_together, write_output   # an OSError names the file
         import io
 
         buf = io.BytesIO()
         contact_sheet(results, columns=args.columns).save(buf, format="PNG", optimize=True)
-        write_output(out / "contact-sheet.png", buf.getvalue())
-        write_output(out / "results.md", md.encode("utf-8"))
+        with results_written_together():      # both, or neither
+            write_output(out / "contact-sheet.png", buf.getvalue())
+            write_output(out / "results.md", md.encode("utf-8"))
         print(f"stress: wrote {out / 'contact-sheet.png'} and {out / 'results.md'}", file=sys.stderr)
         return 1 if failed else 0
     except KeyboardInterrupt:
