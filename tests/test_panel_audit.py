@@ -501,3 +501,46 @@ def test_every_section_draws_for_every_shape(script):
     with pytest.raises(SceneError):             # (the helper sees a bad scene)
         scene.objects[0].material = "nothing"
         valid(scene)
+
+
+# ------------------------------------------------------------ refused edits are said (audit, 2026-12-04)
+
+
+@pytest.mark.parametrize("scene_name, key, value, says", [
+    ("default", "obj3/min", (1.0, -0.1, -0.1), "box rod: not taken: min must stay below max"),
+    ("default", "obj1/wall", 5.0, "cylinder glass: wall not taken: it must stay thinner than the radius"),
+    ("default", "obj1/radius", 0.01, "cylinder glass: radius not taken: it must stay above the wall (0.06)"),
+    ("default", "position", (0.0, 5.0, 0.9), "camera not moved: camera.target: the view direction is"),
+    ("mirror-ball", "light0/direction", (0.0, 0.0, 0.0), "direction cannot be zero"),
+])
+def test_a_refused_edit_says_why_in_the_panel(script, scene_name, key, value, says):
+    # the README promised "not taken, with a note in the panel"; only the
+    # limit of 32 transparent objects had one (the viewer audit)
+    import copy
+
+    from viewer.ui import Panel
+
+    scene = load_scene(scene_name)
+    if key == "position":             # the value is straight above this target: a view straight down
+        scene.camera.target = (0.0, 0.9, 0.9)
+    before = copy.deepcopy(scene)
+    panel = Panel(scene)
+    edit(script, panel, scene, **E(key, value))
+    assert says in panel.edit_note, panel.edit_note
+    assert scene == before                         # not taken
+    valid(scene)
+
+
+def test_a_material_made_transparent_says_its_reflectivity_goes_and_gets_it_back(script):
+    from viewer.ui import Panel
+
+    scene = load_scene("default")
+    panel = Panel(scene)
+    ball = scene.materials["ball"]
+    assert ball.reflectivity == 0.25 and ball.transparency == 0.0
+    edit(script, panel, scene, **E("mat-ball/transparency", 0.5))
+    assert ball.transparency == 0.5 and ball.reflectivity == 0.0
+    assert "ball: reflectivity 0.25 set to 0 while it is transparent" in panel.edit_note
+    valid(scene)
+    edit(script, panel, scene, **E("mat-ball/transparency", 0.0))
+    assert ball.transparency == 0.0 and ball.reflectivity == 0.25

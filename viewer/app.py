@@ -204,6 +204,10 @@ class Viewer:
         self.show_panel = False
         self.show_help = False
         self.actions: list[str] = []
+        # keys that came while ImGui still had earlier input to take (it takes
+        # a few events a frame): (its event id, name, mods, action); shortcut
+        # or typed text is decided in the frame ImGui takes the key
+        self._deferred_keys: list[tuple[int, str, int, int]] = []
         self.need_preview = True
         self.needs_display = True
         self.ui_frames = 2
@@ -309,18 +313,36 @@ class Viewer:
             if act is not None:
                 self.actions.append(act)
             return
+        backlog = self._imgui_backlog()      # ImGui's events not taken yet, before this one
         if self._imgui_ready:
             self.imgui.backends.glfw_key_callback(self._addr, key, scancode, action, mods)
-        if action == glfw.RELEASE or self._ui_wants_keys():
-            return
         name = _KEYS.get(key)
-        if name is None:
+        if action == glfw.RELEASE or name is None:
             return
+        if backlog or self._deferred_keys:
+            # typed fast into a text field, a Return then P: the field was
+            # still active for ImGui (which had not taken the Return yet), so
+            # P was given to it as text, and dropped when it took the Return
+            event_id = self.imgui.get_current_context().input_events_next_event_id - 1
+            self._deferred_keys.append((event_id, name, mods, action))
+            return
+        if not self._ui_wants_keys():
+            self._shortcut(name, mods, action)
+
+    def _shortcut(self, name: str, mods: int, action: int) -> None:
         if name in "123456789" and action == glfw.PRESS and self._quality_on():
             self._quality_off("max error off: max depth set by key")
         act = self.controls.key(name, shift=bool(mods & glfw.MOD_SHIFT), repeat=action == glfw.REPEAT)
         if act is not None:
             self.actions.append(act)
+
+    def _imgui_backlog(self) -> int:
+        """Input events ImGui has been given and not taken yet: with its
+        trickling queue it takes a key's down and up, and the text typed,
+        over several frames when they come faster than frames."""
+        if not self._imgui_ready:
+            return 0
+        return len(self.imgui.get_current_context().input_events_queue)
 
     def _on_char(self, win, codepoint):
         if self._imgui_ready:
@@ -527,6 +549,19 @@ class Viewer:
             imgui.backends.opengl3_new_frame()
             imgui.backends.glfw_new_frame()
             imgui.new_frame()
+            if self._deferred_keys:
+                # the keys this new_frame took: want_text_input, which it has
+                # just set from the last frame's widgets, says whether a text
+                # field had the keyboard when ImGui took each (trickling, it
+                # takes a key's press and the text typed in different frames)
+                ctx = imgui.get_current_context()
+                queue = ctx.input_events_queue
+                left = queue[0].event_id if len(queue) else ctx.input_events_next_event_id
+                taken = [k for k in self._deferred_keys if k[0] < left]
+                self._deferred_keys = [k for k in self._deferred_keys if k[0] >= left]
+                for _, name, mods, action in taken:
+                    if not self._ui_wants_keys():
+                        self._shortcut(name, mods, action)
             if self.show_panel:
                 ds = imgui.get_io().display_size
                 self.panel.view = self.controls.view
@@ -619,6 +654,10 @@ class Viewer:
             self._last_display = time.perf_counter()
         self.needs_display = False
         self.ui_frames = max(0, self.ui_frames - 1)
+        if ui and (self._deferred_keys or self._imgui_backlog()):
+            # ImGui takes fast input over several frames: draw until it has
+            # all of it (it waited for the next mouse move), then the keys
+            self.ui_frames = max(self.ui_frames, 1)
 
         t1 = time.perf_counter()
         if draw:

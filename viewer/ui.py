@@ -93,6 +93,7 @@ class Panel:
         self.adaptive = True  # adaptive accumulation (the app keeps it in step with Progressive)
         self._drawn_size: tuple[float, float] | None = None  # the window size it was last drawn for
         self.edit_note = ""  # why the last edit of objects, lights or materials was refused
+        self._reflectivity_kept: dict = {}   # a material's, while it is transparent
         self.sky_image = scene.sky.image or ""  # the sky picture's box
         self.sky_note = ""  # why the picture in that box was refused
         self.rect = (0.0, 0.0, 0.0, 0.0)  # the panel's window: x0, y0, x1, y1
@@ -230,7 +231,10 @@ class Panel:
             c1, pos = _vec3("position", cam.position)
             c2, tgt = _vec3("target", cam.target)
             c3, fov = _float("fov", cam.fov, 0.2, 1.0, 179.0, "%.1f")
-            if (c1 or c2) and _camera_ok(pos, tgt):
+            problem = _camera_problem(pos, tgt) if (c1 or c2) else None
+            if problem:
+                self.edit_note = f"camera not moved: {problem}"
+            elif c1 or c2:
                 cam.position, cam.target = pos, tgt
                 res.changed = res.camera_changed = True
             if c3:
@@ -349,6 +353,8 @@ class Panel:
             c, v = _vec3("direction", lt.direction, 0.01)
             if c and any(x != 0.0 for x in v):
                 lt.direction, changed = v, True
+            elif c:
+                self.edit_note = "direction not taken: a directional light's direction cannot be zero"
         c, v = _color("color", lt.color)
         if c:
             lt.color, changed = v, True
@@ -384,7 +390,14 @@ class Panel:
         elif c:
             m.transparency, changed = v, True
             if v > 0 and m.reflectivity > 0:
-                m.reflectivity = 0.0  # a dielectric's reflection is Fresnel's (scene format)
+                # a dielectric's reflection is Fresnel's (scene format): said,
+                # and given back if the material is made opaque again
+                self._reflectivity_kept[name or id(m)] = m.reflectivity
+                self.edit_note = (f"{name or 'material'}: reflectivity {m.reflectivity:g} set to 0 while it is "
+                                  "transparent (a transparent material reflects by Fresnel's law only)")
+                m.reflectivity = 0.0
+            elif v == 0 and (name or id(m)) in self._reflectivity_kept:
+                m.reflectivity = self._reflectivity_kept.pop(name or id(m))
         c, v = _float("ior", m.ior, 0.002, 1.0, 10.0)
         if c:
             m.ior, changed = v, True
@@ -482,6 +495,8 @@ class Panel:
             c2, hi = _vec3("max", o.max)
             if (c1 or c2) and all(a < b for a, b in zip(lo, hi)):
                 o.min, o.max, changed = lo, hi, True
+            elif c1 or c2:
+                self.edit_note = f"{_what(o)}: not taken: min must stay below max in x, y and z"
             c, v = _vec3("rotate", o.rotate, 0.5)
             if c:
                 o.rotate, changed = v, True
@@ -495,12 +510,13 @@ class Panel:
                 o.base, changed = v, True
             # 0 < wall < radius and wall < height (scene format)
             wall = o.wall or 0.0
-            c, v = _float("radius", o.radius, 0.005, 1e-4, _BIG)
-            if c and v > wall:
-                o.radius, changed = v, True
-            c, v = _float("height", o.height, 0.005, 1e-4, _BIG)
-            if c and v > wall:
-                o.height, changed = v, True
+            for key in ("radius", "height"):
+                c, v = _float(key, getattr(o, key), 0.005, 1e-4, _BIG)
+                if c and v > wall:
+                    setattr(o, key, v)
+                    changed = True
+                elif c:
+                    self.edit_note = f"{_what(o)}: {key} not taken: it must stay above the wall ({wall:g})"
             c, on = imgui.checkbox("wall (a vessel)", o.wall is not None)
             if c and on != (o.wall is not None):
                 o.wall = _round(0.1 * min(o.radius, o.height)) if on else None
@@ -509,6 +525,9 @@ class Panel:
                 c, v = _float("wall", o.wall, 0.001, 1e-5, _BIG, "%.4f")
                 if c and v < o.radius and v < o.height:
                     o.wall, changed = v, True
+                elif c:
+                    self.edit_note = (f"{_what(o)}: wall not taken: it must stay thinner than the radius "
+                                      f"({o.radius:g}) and the height ({o.height:g})")
         return changed
 
     def _load_sky_image(self, scene: Scene) -> bool:
@@ -635,14 +654,20 @@ def _new_object(shape: str, scene: Scene) -> SceneObject:
     return o
 
 
-def _camera_ok(pos, tgt) -> bool:
+def _what(o: SceneObject) -> str:
+    return f"{o.type} {o.name}" if o.name else o.type
+
+
+def _camera_problem(pos, tgt) -> str | None:
+    """Why the scene format refuses this camera ("camera.target: must differ
+    from camera.position"), or None."""
     from .scene import Camera, SceneError, validate_camera
 
     try:
         validate_camera(Camera(tuple(pos), tuple(tgt)))
-    except SceneError:
-        return False
-    return True
+    except SceneError as e:
+        return str(e).split(": ", 1)[-1]
+    return None
 
 
 # ------------------------------------------------------------ HUD and help
