@@ -195,20 +195,38 @@ def test_view_checks_the_scene_before_the_display(tmp_path):
     assert r.returncode == 2 and "missing.toml" in r.stderr and "Traceback" not in r.stderr
 
 
-def test_the_progress_bar_waits_for_a_long_render_and_is_erased(monkeypatch):
-    import io
+class _Tty:
+    """A terminal for the progress bar: stderr that says it is a tty, and a
+    clock the test moves (viewer.cli's perf_counter)."""
 
+    def __init__(self, monkeypatch):
+        from viewer import cli
+
+        self.monkeypatch, self.clock = monkeypatch, [100.0]
+        monkeypatch.setattr(cli.time, "perf_counter", lambda: self.clock[0])
+        self.new_stderr()
+
+    def new_stderr(self):
+        import io
+
+        from viewer import cli
+
+        class Tty(io.StringIO):
+            def isatty(self):
+                return True
+
+        self.err = Tty()
+        self.monkeypatch.setattr(cli.sys, "stderr", self.err)
+        return self.err
+
+
+def test_the_progress_bar_waits_for_a_long_render_and_is_erased(monkeypatch):
     from viewer import cli
 
-    class Tty(io.StringIO):
-        def isatty(self):
-            return True
-
-    clock = [100.0]
-    monkeypatch.setattr(cli.time, "perf_counter", lambda: clock[0])
+    tty = _Tty(monkeypatch)
+    clock = tty.clock
     for long in (False, True):
-        err = Tty()
-        monkeypatch.setattr(cli.sys, "stderr", err)
+        err = tty.new_stderr()
         show = cli._progress_bar("render 8x8")
         show(1, 4)                                 # at once: nothing yet
         assert err.getvalue() == ""
@@ -229,18 +247,10 @@ def test_the_progress_bar_waits_for_a_long_render_and_is_erased(monkeypatch):
 def test_the_progress_bar_is_drawn_at_most_ten_times_a_second(monkeypatch):
     # a render calls back after every tile: 1000 calls in 2 s must not be
     # 1000 lines of terminal text (a 4 s render wrote about 75 KB)
-    import io
-
     from viewer import cli
 
-    class Tty(io.StringIO):
-        def isatty(self):
-            return True
-
-    clock = [100.0]
-    monkeypatch.setattr(cli.time, "perf_counter", lambda: clock[0])
-    err = Tty()
-    monkeypatch.setattr(cli.sys, "stderr", err)
+    tty = _Tty(monkeypatch)
+    clock, err = tty.clock, tty.err
     show = cli._progress_bar("render 8x8")
     for done in range(1000):
         show(done, 1000)
@@ -256,18 +266,10 @@ def test_the_progress_bar_is_drawn_at_most_ten_times_a_second(monkeypatch):
 def test_the_progress_bar_starts_over_when_render_draws_again_in_passes(monkeypatch):
     # render() reports the count going back when a cut tree makes it draw the
     # image again: the bar is labelled so and its estimate uses its own clock
-    import io
-
     from viewer import cli
 
-    class Tty(io.StringIO):
-        def isatty(self):
-            return True
-
-    clock = [100.0]
-    monkeypatch.setattr(cli.time, "perf_counter", lambda: clock[0])
-    err = Tty()
-    monkeypatch.setattr(cli.sys, "stderr", err)
+    tty = _Tty(monkeypatch)
+    clock, err = tty.clock, tty.err
     show = cli._progress_bar("render 8x8", again="render 8x8 again")
     clock[0] += 10.0
     show(4, 4)                                   # the one-pass image: 10 s
