@@ -162,6 +162,9 @@ def test_results_md_names_the_machine_and_the_renderer(gl, tmp_path):
     mi = machine_info()
     assert describe(gl) in md
     assert f"{mi['cpu'] or mi['machine']} ({mi['cpus_usable']} usable CPUs)" in md and mi["platform"] in md
+    # the verdict and the command, as stdout and bench's files have them
+    assert md.rstrip().endswith("1 of 1 cases within tolerance") and "command: `glassray" in md
+    assert md.startswith("glassray stress: 1 case, ")
 
 
 @pytest.mark.parametrize("args, text", [

@@ -993,7 +993,7 @@ def _run_cases(args, names: list[str], out: Path) -> int:
             results.append(suite.run_case(get_case(name), args.size))
             print(f"stress: {name}: {'ok' if results[-1].ok else 'FAIL'}", file=sys.stderr, flush=True)
         variant = "textbook intersections (NAIVE_INTERSECT)" if args.naive else "robust intersections"
-        head = f"glassray stress: {len(results)} cases, {variant}, {describe(ctx)}"
+        head = f"glassray stress: {len(results)} case{'' if len(results) == 1 else 's'}, {variant}, {describe(ctx)}"
         from .bench import machine_info
 
         mi = machine_info()
@@ -1003,9 +1003,12 @@ def _run_cases(args, names: list[str], out: Path) -> int:
         _print(head)
         _print(text)
         failed = [r.name for r in results if not r.ok]
-        _print(f"{len(results) - len(failed)} of {len(results)} cases within tolerance"
-               + (f"; failed: {', '.join(failed)}" if failed else ""))
-        md = f"{head}\n\nmachine: {machine}\n\n{format_table(results, markdown=True)}\n"
+        verdict = (f"{len(results) - len(failed)} of {len(results)} cases within tolerance"
+                   + (f"; failed: {', '.join(failed)}" if failed else ""))
+        _print(verdict)
+        # the file says what stdout said: the verdict, and the command that reproduces it
+        md = (f"{head}\n\nmachine: {machine}\n\ncommand: `{mi['command']}`\n\n"
+              f"{format_table(results, markdown=True)}\n\n{verdict}\n")
         if args.intersections:
             stats = intersection_errors(ctx)
             _print("\nfloat32 relative error of t, first hit against the float64 reference:")
