@@ -230,3 +230,34 @@ def test_the_help_stays_in_a_window_resized_while_it_is_open(ui):
         x0, y0, x1, y1 = ui_module.help_rect
         w, h = size
         assert 0 <= x0 < x1 <= w and 0 <= y0 < y1 <= h, (size, ui_module.help_rect)
+
+
+def test_the_add_buttons_stay_inside_a_narrow_panel(ui, monkeypatch):
+    # side by side, "add plane" was cut off at the panel's edge in a 640 px window
+    from viewer import ui as ui_module
+    from viewer.ui import Panel
+
+    real = imgui.small_button
+    seen = {}
+
+    def small_button(label):
+        clicked = real(label)
+        if label.startswith("add "):
+            seen[label] = (imgui.get_item_rect_min().x, imgui.get_item_rect_max().x,
+                           imgui.get_window_pos().x + imgui.get_window_size().x)
+        return clicked
+
+    monkeypatch.setattr(ui_module.imgui, "small_button", small_button)
+    scene = load_scene("default")
+    panel = Panel(scene)
+    panel.open_all = True
+    for w, h in ((640, 480), (1280, 720)):
+        ui.display_size = imgui.ImVec2(w, h)
+        seen.clear()
+        for _ in range(3):
+            imgui.new_frame()
+            panel.draw(scene, (w, h))
+            imgui.render()
+        assert {"add sphere", "add plane", "add point light", "add directional light"} <= set(seen)
+        for label, (x0, x1, right) in seen.items():
+            assert x1 <= right, (w, label, x1, right)

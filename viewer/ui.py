@@ -263,12 +263,10 @@ class Panel:
                 del scene.lights[remove]
                 res.changed = True
             imgui.begin_disabled(len(scene.lights) >= MAX_LIGHTS)
-            for kind in ("point", "directional"):
-                if imgui.small_button(f"add {kind} light"):
-                    scene.lights.append(_new_light(kind, scene))
-                    res.changed = True
-                imgui.same_line()
-            imgui.new_line()
+            kind = _button_row({"add point light": "point", "add directional light": "directional"})
+            if kind is not None:
+                scene.lights.append(_new_light(kind, scene))
+                res.changed = True
             imgui.end_disabled()
             c, v = _color("ambient", scene.ambient)
             if c:
@@ -452,16 +450,14 @@ class Panel:
         if not scene.objects:
             imgui.text_disabled("(no objects)")
         imgui.begin_disabled(len(scene.objects) >= MAX_OBJECTS)
-        for shape in _SHAPES:
-            if imgui.small_button(f"add {shape}"):
-                o = _new_object(shape, scene)
-                if scene.is_transparent(o) and _transparent_count(scene) >= MAX_TRANSPARENT_OBJECTS:
-                    self.edit_note = f"not added: at most {MAX_TRANSPARENT_OBJECTS} transparent objects are supported"
-                else:
-                    scene.objects.append(o)
-                    changed = True
-            imgui.same_line()
-        imgui.new_line()
+        shape = _button_row({f"add {shape}": shape for shape in _SHAPES})
+        if shape is not None:
+            o = _new_object(shape, scene)
+            if scene.is_transparent(o) and _transparent_count(scene) >= MAX_TRANSPARENT_OBJECTS:
+                self.edit_note = f"not added: at most {MAX_TRANSPARENT_OBJECTS} transparent objects are supported"
+            else:
+                scene.objects.append(o)
+                changed = True
         imgui.end_disabled()
         return changed
 
@@ -652,6 +648,22 @@ def _new_object(shape: str, scene: Scene) -> SceneObject:
     else:
         o.height = 0.0
     return o
+
+
+def _button_row(buttons: dict[str, object]):
+    """Small buttons side by side, going on to the next line where the next
+    would pass the panel's edge ("add plane" was cut off in a 640 px
+    window); the value of the one clicked, or None."""
+    clicked = None
+    style = imgui.get_style()
+    for i, (label, value) in enumerate(buttons.items()):
+        if i:
+            imgui.same_line()
+            if imgui.get_content_region_avail().x < imgui.calc_text_size(label).x + 2 * style.frame_padding.x:
+                imgui.new_line()
+        if imgui.small_button(label):
+            clicked = value
+    return clicked
 
 
 def _what(o: SceneObject) -> str:
