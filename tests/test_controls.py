@@ -419,3 +419,23 @@ def test_default_scene_loads_into_controls():
     c = Controls(s, (1280, 720))
     assert np.allclose(c.camera.position, s.camera.position)
     assert_camera_ok(c)
+
+
+def test_the_hud_says_idle_once_every_sample_is_in():
+    # the viewer draws nothing more then: "303.7 ms  22 fps" stayed on screen,
+    # stale, long after (the viewer audit)
+    from types import SimpleNamespace
+
+    pytest.importorskip("glfw")
+    from viewer.app import Viewer
+
+    v = object.__new__(Viewer)           # _hud_lines reads only these
+    v.panel, v.frame_ms, v.fps = None, 303.7, 22.0
+    v.scene = SimpleNamespace(render=SimpleNamespace(max_depth=8))
+    v.controls = SimpleNamespace(view="image")
+    v.prog = SimpleNamespace(active_resolution=(320, 180), size=(320, 180), samples=16, passes_done=7,
+                             adaptive=False, done=False)
+    assert v._hud_lines()[0] == "303.7 ms  22 fps"
+    v.prog.passes_done, v.prog.done = 16, True
+    lines = v._hud_lines()
+    assert lines[0] == "idle (last frame 303.7 ms)" and lines[2] == "samples 16/16"

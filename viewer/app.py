@@ -688,7 +688,11 @@ class Viewer:
         else:
             done = self.prog.passes_done
             samples = f"samples {done}/{total}" + ("" if done >= total else " ...")
-        return [f"{self.frame_ms:.1f} ms  {self.fps:.0f} fps",
+        # once every sample is in, the viewer draws nothing more: a rate of
+        # frames would stay on screen, stale (it read 22 fps long after)
+        timing = (f"idle (last frame {self.frame_ms:.1f} ms)" if self.prog.done and not preview
+                  else f"{self.frame_ms:.1f} ms  {self.fps:.0f} fps")
+        return [timing,
                 f"{rw}x{rh}" + (" (preview)" if preview else ""),
                 samples,
                 f"max depth {self.scene.render.max_depth}", *q]
