@@ -1029,7 +1029,8 @@ def results_written_together():
 
 def results_folder_problem(out: Path) -> str | None:
     """Why results cannot be written into the folder `out` (made if
-    missing), or None: checked before a run, not found after it."""
+    missing; its parent must exist), or None: checked before a run, not
+    found after it."""
     if out.exists() and not out.is_dir():
         return f"{out}: cannot write results there: it is a file, not a folder"
     if not out.parent.is_dir():      # as render's output: a mistyped path is not made
