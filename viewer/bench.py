@@ -1061,13 +1061,11 @@ def remove_stale(paths: list[Path]) -> list[Path]:
     return stale
 
 
-def _unique_stems(names: list[str]) -> list[str] | None:
+def _unique_stems(names: list[str]) -> list[str]:
     """A distinct stem (the scene column, the table and plot title, the
     reference's file name) per scene: a file's name without .toml, with
     "-2", "-3", ... after the second and later of the same stem (a.toml and
-    other/a.toml).  None if a scene is named twice."""
-    if len(set(names)) != len(names):
-        return None
+    other/a.toml).  run() has refused a file named twice (_named_twice)."""
     stems: list[str] = []
     for name in names:
         stem = base = _stem(name, None)
