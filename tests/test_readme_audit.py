@@ -37,9 +37,21 @@ SPEC_CLI = ROOT / "docs" / "cli.md"          # the spec's copy shipped with the 
 SUBCOMMANDS = ("view", "render", "check", "bench", "stress")
 
 
+#: The project's own long-form documents, which the README links to and
+#: which get the same checks as the README (docs/cli.md and
+#: docs/scene-format.md are copies of the spec, checked against it elsewhere).
+DOCS = ("performance.md", "adaptive.md", "benchmark.md")
+
+
 @pytest.fixture(scope="module")
 def readme() -> str:
     return README.read_text(encoding="utf-8")
+
+
+@pytest.fixture(scope="module", params=DOCS)
+def doc(request) -> tuple[str, str]:
+    """(name, text) of one of the docs."""
+    return f"docs/{request.param}", (ROOT / "docs" / request.param).read_text(encoding="utf-8")
 
 
 # ---------------------------------------------------------------- text helpers
@@ -120,20 +132,26 @@ def links(text: str) -> list[tuple[int, str]]:
 # ---------------------------------------------------------------- checks (each returns its problems)
 
 
-def check_link_targets(text: str, root: Path = ROOT) -> list[str]:
+def check_link_targets(text: str, root: Path = ROOT, name: str = "README") -> list[str]:
+    """Every relative link names a file (relative to `root`, the folder of
+    the document), and a link to a heading of another markdown file
+    (``docs/benchmark.md#results``, ``../README.md#benchmark``) names one
+    of its headings."""
     bad = []
     for line, target in links(text):
         if target.startswith("#") or re.match(r"^[a-z][a-z0-9+.-]*:", target):
             continue
-        path = target.split("#")[0]
+        path, _, anchor = target.partition("#")
         if not (root / path).exists():
-            bad.append(f"README:{line}: link to {target}: no such file")
+            bad.append(f"{name}:{line}: link to {target}: no such file")
+        elif anchor and path.endswith(".md") and anchor not in anchors((root / path).read_text(encoding="utf-8")):
+            bad.append(f"{name}:{line}: link to {target}: no heading of {path} has that anchor")
     return bad
 
 
-def check_anchor_links(text: str) -> list[str]:
+def check_anchor_links(text: str, name: str = "README") -> list[str]:
     known = anchors(text)
-    return [f"README:{line}: link to {target}: no heading has that anchor"
+    return [f"{name}:{line}: link to {target}: no heading has that anchor"
             for line, target in links(text) if target.startswith("#") and target[1:] not in known]
 
 
@@ -356,12 +374,41 @@ def test_the_controls_table_holds_every_row_of_the_spec(readme):
     assert check_controls_table(readme, SPEC_CLI.read_text(encoding="utf-8")) == []
 
 
+# ---------------------------------------------------------------- the docs the README links to
+
+
+def test_the_readme_links_every_doc(readme):
+    assert [d for d in DOCS if f"(docs/{d}" not in readme] == []
+
+
+def test_every_link_of_a_doc_names_a_file_and_heading(doc):
+    name, text = doc
+    assert check_link_targets(text, ROOT / "docs", name) == []
+    assert check_anchor_links(text, name) == []
+
+
+def test_every_glassray_command_of_a_doc_is_accepted(doc):
+    assert check_commands(readme_commands(doc[1])) == []
+
+
+def test_every_flag_and_tool_of_a_doc_exists(doc):
+    assert check_every_flag(doc[1]) == []
+    assert check_tool_scripts(doc[1]) == []
+
+
 # ---------------------------------------------------------------- each check fails on a broken README
 
 
 def test_link_check_catches_a_missing_image():
     assert check_link_targets("![shot](docs/no-such-picture.png) and [ok](docs/cli.md)\n") == [
         "README:1: link to docs/no-such-picture.png: no such file"]
+
+
+def test_link_check_catches_a_wrong_heading_of_another_file_and_resolves_from_the_docs_folder():
+    text = "[a](../README.md#benchmark) [b](../README.md#no-such-section) [c](cli.md) [d](docs/cli.md)\n"
+    assert check_link_targets(text, ROOT / "docs", "docs/x.md") == [
+        "docs/x.md:1: link to ../README.md#no-such-section: no heading of ../README.md has that anchor",
+        "docs/x.md:1: link to docs/cli.md: no such file"]
 
 
 def test_anchor_check_catches_a_wrong_anchor_and_follows_github_slugs():

@@ -1,6 +1,6 @@
 """How far the adaptive sampler's error estimate is from the best any
-estimate could do: the measurement behind the README's "What limits
-adaptive sampling" (issue 7).
+estimate could do: the measurement behind docs/adaptive.md's "The bound of
+point samples" (issue 7).
 
 For each scene at 320x180 it records, for every pixel that the corner and
 centre rays flag (viewer/adaptive.py, step 1), each of the first 256

@@ -1,7 +1,7 @@
 """Where one adaptive render's time goes: each step of
 ``viewer.adaptive.AdaptiveRender`` (a GPU draw call, or the numpy
 bookkeeping between passes) timed on its own, after a warm-up render with
-every shader variant compiled (README, "Adaptive anti-aliasing").
+every shader variant compiled (docs/adaptive.md).
 
 With ``--passes``: the first pass and a list pass of 8 samples over the
 pixels whose footprint lies on the checker, with footprint samples and with

@@ -1,5 +1,5 @@
 """Adaptive against uniform sampling at equal error: the numbers of the
-README's "Adaptive anti-aliasing" section (issue 7).
+README's "Adaptive anti-aliasing" section and docs/adaptive.md (issue 7).
 
 For each scene at 320x180: uniform renders at 16, 32 and 64 samples (as
 ``uniform-point`` with point samples only, the baseline of the ratios, as

@@ -1,5 +1,5 @@
 """Rays against time in one frame, per culling group, and what that implies
-for issue 5's 100 ms target (README, "Speed").
+for issue 5's 100 ms target (README, "Measured speed"; docs/performance.md).
 
 For a scene (default: the default scene) at WxH (default 1280x720), 1
 sample: the whole frame's wall-clock and CPU time (median of 9 after a

@@ -1,6 +1,6 @@
 """The shader on another OpenGL driver: the same images, and its frame times.
 
-Made for the GPU machine a session is sometimes lent (README, "On a GPU");
+Made for the GPU machine a session is sometimes lent (docs/performance.md, "On a GPU");
 it runs anywhere an offscreen context does.
 
     python tools/gpu_check.py images DIR    # the built-in scenes, 320x180, 4 samples, to DIR/NAME.npy

@@ -1,5 +1,5 @@
 """Which shader programs a glassray command compiles, and how long each
-took (README, "On a GPU": compile on use).
+took (docs/performance.md, "On a GPU": compile on use).
 
 Runs `glassray ARGS...` in this process with moderngl's Context.program
 wrapped, then prints one line per program built: the seconds the driver

@@ -1,5 +1,5 @@
 """Specialised against generic shader, and where a frame's time goes
-(README, "Speed").
+(docs/performance.md; README, "Measured speed").
 
 For each scene named (default: bench-opaque, glass-sphere, default): the
 wall-clock and CPU time of a 1280x720, 1-sample render with the specialised

@@ -74,7 +74,7 @@ picture inside glass); a flat region is exact with one centred sample.  So:
    neighbourhood of centres says where edges may be (and no footprint
    samples are taken).
 
-Measured (README, "Adaptive anti-aliasing"; tools/adaptive_vs_uniform.py):
+Measured (README, "Adaptive anti-aliasing", and docs/adaptive.md; tools/adaptive_vs_uniform.py):
 against a 512-sample float64 reference at 320x180 footprint samples reach
 the error of 64 uniform samples with 4 rays per pixel on glass-sphere (5
 before chain footprints; 0.74x of it at 4 since the closed form's wider

@@ -680,7 +680,7 @@ GLASSRAY_SPP = (1, 2, 4, 8, 16, 32, 64, 128, 256)
 #: a warning each.  Measured per sample (whitted-glass, 320x180, peerwg4):
 #: the powers of 4 took 8.7-9.5 ms of wall time, the counts 9 * 4^k
 #: 11.0-11.8 ms (the rounded counts of the earlier series: 12.4-13.1 ms), so
-#: the README also gives the ratio at the 4096 point's rate.  Up to the time
+#: docs/benchmark.md also gives the ratio at the 4096 point's rate.  Up to the time
 #: limit (36864 = 192^2 only with --peer-time-limit over 16384's time: about
 #: 47 s on a 2-core machine).
 MITSUBA_SPP = (1, 4, 9, 16, 36, 64, 144, 256, 576, 1024, 2304, 4096, 9216, 16384, 36864)
