@@ -58,6 +58,7 @@ line says so (exit 0: a budget is a request, not a contract).
 
 from __future__ import annotations
 
+import errno
 import hashlib
 import json
 import math
@@ -95,6 +96,21 @@ def _warn_once(key: str, text: str) -> None:
     if key not in _WARNED:
         _WARNED.add(key)
         print(f"glassray: {text}", file=sys.stderr, flush=True)
+
+
+def _whole(v) -> int:
+    """A cache file's integer: a JSON integer (not a boolean, a float or a string)."""
+    if isinstance(v, bool) or not isinstance(v, int):
+        raise TypeError(f"expected an integer, got {v!r}")
+    return v
+
+
+def _real(v) -> float:
+    """A cache file's number: a JSON integer or float (NaN and inf as Python
+    writes them), not a boolean or a string."""
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise TypeError(f"expected a number, got {v!r}")
+    return float(v)
 
 
 # ---------------------------------------------------------------- candidates and the pick
@@ -298,13 +314,22 @@ class Cache:
                 raise ValueError("stored for another key")
             out = {}
             for k, m in doc["measured"].items():
-                c = Candidate(int(m["samples"]), int(m["max_depth"]), float(m["min_weight"]))
-                meas = Measured(c, float(m["time_ms"]), float(m["rmse"]), float(m.get("frac_off", 0.0)))
-                if c.key() != k or not (math.isfinite(meas.time_ms) and meas.time_ms >= 0 and meas.rmse >= 0):
+                c = Candidate(_whole(m["samples"]), _whole(m["max_depth"]), _real(m["min_weight"]))
+                meas = Measured(c, _real(m["time_ms"]), _real(m["rmse"]), _real(m.get("frac_off", 0.0)))
+                # the ranges the program writes (rmse inf: every measured pixel cut)
+                if (c.key() != k or c.samples < 1 or not 1 <= c.max_depth <= 64 or not 0 <= c.min_weight <= 1
+                        or not (math.isfinite(meas.time_ms) and meas.time_ms >= 0 and meas.rmse >= 0)
+                        or not 0 <= meas.frac_off <= 1):
                     raise ValueError(f"bad entry {k!r}")
                 out[k] = meas
-            self.noise = float(doc.get("reference", {}).get("noise_rmse", float("nan")))
-            self.cut_pixels = int(doc.get("reference", {}).get("cut_pixels", 0))
+            ref = doc.get("reference", {})
+            noise = _real(ref.get("noise_rmse", float("nan")))
+            cut = _whole(ref.get("cut_pixels", 0))
+            if not (math.isnan(noise) or (math.isfinite(noise) and noise >= 0)):
+                raise ValueError(f"bad reference noise {noise!r}")
+            if not 0 <= cut <= self.key.layout.pixels:
+                raise ValueError(f"bad cut pixel count {cut!r}")
+            self.noise, self.cut_pixels = noise, cut
             return out
         except (ValueError, KeyError, TypeError, AttributeError) as e:
             _warn_once(str(self.path), f"quality cache {self.path} is corrupt ({type(e).__name__}: {e}); "
@@ -317,9 +342,11 @@ class Cache:
         except (OSError, ValueError, EOFError):   # EOFError: an empty (truncated) file
             return None
         w, h = self.key.layout.size
-        # an .npz archive or an array of strings is no reference either
+        # an .npz archive or an array of strings is no reference either; NaN
+        # marks a pixel left out (the driver's loop limit cut its tree: see
+        # Measurement._run), an infinite or negative radiance is corrupt
         if (not isinstance(ref, np.ndarray) or ref.dtype.kind not in "fiu" or ref.shape != (h, w, 3)
-                or not np.all(np.isfinite(ref))):
+                or not np.all(np.isnan(ref) | (np.isfinite(ref) & (ref >= 0)))):
             return None
         return ref.astype(np.float64)
 
@@ -338,6 +365,8 @@ class Cache:
                                 "rmse": m.rmse, "frac_off": m.frac_off}
                             for k, m in sorted(measured.items())}}
         try:
+            if self.root.exists() and not self.root.is_dir():
+                raise NotADirectoryError(errno.ENOTDIR, "it is a file, not a folder")
             self.root.mkdir(parents=True, exist_ok=True)
             if reference is not None:
                 buf = io.BytesIO()
@@ -429,6 +458,7 @@ class Measurement:
                       + sum(2 + MIN_TIMED_PASSES + sum(ss) for ss in by_trace.values()))
         self.steps_done = 0
         self.done = not self.todo
+        self.saved = False  # finish() wrote what was measured to the cache
         self.rendered_reference = False
         #: measured pixels left out of the errors: a tree in them (the
         #: reference's or a candidate's) was cut by the driver's loop limit
@@ -447,6 +477,8 @@ class Measurement:
             return True
         import moderngl
 
+        from . import interrupt
+
         t0 = time.perf_counter()
         try:
             while True:
@@ -457,6 +489,10 @@ class Measurement:
                     self._release()
                     return True
                 self.steps_done += 1
+                # Ctrl-C between passes (viewer/interrupt.py): a first
+                # measurement takes tens of seconds, and one that ran to its
+                # end before the render's first check ignored Ctrl-C that long
+                interrupt.check()
                 if time.perf_counter() - t0 >= budget_s:
                     return False
         except BaseException:
@@ -649,8 +685,11 @@ def prepare(ctx, scene, width: int, height: int, samples: int | None = None, max
 def finish(meas: Measurement, cache: Cache, cands: list[Candidate], max_error: float) -> Choice:
     """Save what was measured and pick."""
     hit = not meas.todo
-    if not hit:
+    if not hit and not meas.saved:
+        # once: the viewer picks again from the same measurement whenever its
+        # budget changes, and that is no new measurement to write
         cache.save(meas.measured, meas.noise, meas.reference, meas.cut_pixels)
+        meas.saved = True
     pool = [meas.measured[c.key()] for c in cands]
     m, met = pick(pool, max_error)
     return Choice(m, met, max_error, hit, meas.layout, meas.noise, cache.path, len(pool), meas.cut_pixels)

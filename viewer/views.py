@@ -31,6 +31,8 @@ def _object_palette(n: int = 256) -> np.ndarray:
 
 
 _OBJECT_COLOURS = _object_palette()
+#: The depth view's colour of a pixel where nothing is hit (display space).
+DEPTH_SKY = 0.5
 
 
 def heat(x: np.ndarray) -> np.ndarray:
@@ -57,13 +59,18 @@ def raw_view(renderer, view: str, width: int, height: int, samples_map: np.ndarr
     return np.repeat(v[..., None], 3, axis=2).astype(np.float32)
 
 
-def _legend(width: int, lo: float, hi: float, unit: str) -> np.ndarray:
-    """A colour bar with its end values, 16 rows high, display colours 0..1."""
+def _legend(width: int, lo: float, hi: float, unit: str, note: str | None = None) -> np.ndarray:
+    """A colour bar with its end values, 16 rows high, display colours 0..1;
+    with `note`, that text instead of the values (a depth view with nothing
+    hit has no range to name)."""
     from PIL import Image, ImageDraw
 
     bar = np.repeat(heat(np.linspace(0, 1, width))[None], 16, axis=0)
     im = Image.fromarray(np.round(bar * 255).astype(np.uint8))
     draw = ImageDraw.Draw(im)
+    if note is not None:
+        draw.text((2, 2), note, fill=(255, 255, 255))
+        return np.asarray(im, np.float64) / 255
     # four significant digits, not a fixed number of decimals: a scene in
     # micrometres has depths of 1e-6 (its legend read "0 ... 0.001")
     left, right = f"{lo:.4g} {unit}", f"{hi:.4g} {unit}"
@@ -100,6 +107,9 @@ def picture(view: str, raw: np.ndarray) -> np.ndarray:
         norm = np.log(np.where(finite, v, lo) / lo) / max(np.log(hi / lo), 1e-12)
     else:
         norm = (v - lo) / max(hi - lo, 1e-12)
-    img = np.where(finite[..., None], heat(norm), 0.0)
+    # no hit (depth inf): black elsewhere, but the depth map's nearest colour
+    # is nearly black, so there the sky is a neutral grey, off the heat map
+    img = np.where(finite[..., None], heat(norm), DEPTH_SKY if view == "depth" else 0.0)
     unit = {"cost": "rays", "samples": "samples (log)"}.get(view, "(log)")
-    return np.concatenate([img, _legend(raw.shape[1], lo, hi, unit)], axis=0)
+    note = "nothing hit" if view == "depth" and not finite.any() else None
+    return np.concatenate([img, _legend(raw.shape[1], lo, hi, unit, note)], axis=0)
