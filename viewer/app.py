@@ -239,6 +239,7 @@ class Viewer:
         self.quality_job = None
         self.quality_parts = None  # (cache, candidates) of the job
         self.quality_choice = None
+        self.quality_said = None  # (measurement, candidate, met) of the last pick printed on stderr
         self.quality_saved = None  # render settings before the pick, restored when it is switched off
         self.quality_status = ""
 
@@ -779,10 +780,18 @@ class Viewer:
         elif self.quality_job is not None and not remeasure:
             return  # measuring: the pick uses the new budget when it is done
         elif self.quality_parts is not None and not remeasure:
-            self._quality_finish()  # the same measurements, another budget
-            return
+            # another budget: pick again from the same measurements, if they
+            # are this view's (the key holds the camera, the lights and the
+            # window's size); else this view's, from the cache where it was
+            # measured before
+            fbw, fbh = glfw.get_framebuffer_size(self.window)
+            key = quality.make_key(self.ctx, self.scene, quality.layout(max(1, fbw), max(1, fbh)))
+            if key.stem() == self.quality_parts[1].key.stem():
+                self._quality_finish()
+                return
         if self.quality_job is not None:
             self.quality_job.close()
+            self.quality_job = None
         fbw, fbh = glfw.get_framebuffer_size(self.window)
         scene = copy.deepcopy(self.scene)
         if remeasure and self.quality_parts is not None:  # measure again: not from the cache
@@ -832,7 +841,11 @@ class Viewer:
                                + (f"; {choice.cut_pixels} pixels left out: trees cut by the driver"
                                   if choice.cut_pixels else ""))
         self._say(self.quality_status)
-        print(f"glassray: {choice.line()}", file=sys.stderr, flush=True)
+        # on stderr once per pick, not at every step of the budget's slider
+        said = (id(meas), c.key(), choice.met)
+        if said != self.quality_said:
+            self.quality_said = said
+            print(f"glassray: {choice.line()}", file=sys.stderr, flush=True)
 
     def _quality_off(self, message: str) -> None:
         if self.quality_job is not None:
@@ -920,7 +933,12 @@ class Viewer:
         glfw.set_window_title(self.window, self._title(merged))
         self.debug_dirty = True
         if self._quality_on():
-            self._quality_update(remeasure=True)
+            # the reloaded scene and shaders: measured unless the cache has
+            # them (its key holds both, so an unchanged file is a hit)
+            if self.quality_job is not None:
+                self.quality_job.close()
+            self.quality_job = self.quality_parts = None
+            self._quality_update()
         self.need_preview = True
         self.last_change = time.perf_counter()
         self._say("reloaded scene and shaders")
