@@ -167,6 +167,13 @@ def read_picture_encoded(path: str | Path) -> np.ndarray:
         warnings.simplefilter("ignore")
         try:
             with Image.open(path) as im:
+                # Pillow opens many formats, whatever the name; a sky is PNG
+                # or JPEG (MPO: a camera's JPEG with extra pictures).  Another
+                # (a float TIFF, a GIF) would be converted by rules of its own:
+                # a float TIFF named .png came out black without a word
+                if im.format not in ("PNG", "JPEG", "MPO"):
+                    raise ImageReadError(f"cannot decode it: it is a {im.format} picture, not a PNG or JPEG "
+                                         "(or a PFM, named .pfm)")
                 deep = im.format == "PNG" and _png16_colour(path)
                 im.load()
                 if deep:           # 16-bit colour: Pillow's RGB/RGBA/LA keep only the high 8 bits

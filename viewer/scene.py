@@ -225,12 +225,36 @@ def printable(text: str) -> str:
     return "".join(c.encode("unicode_escape").decode("ascii") if _is_control(c) else c for c in text)
 
 
+#: The longest key, string or number a message quotes in full: a longer one
+#: (a key of a megabyte of junk) is shown by its start and end, so that the
+#: message stays a line a person can read.
+MAX_SHOWN = 80
+
+
+#: The same for a file's path (a real one is at most PATH_MAX, 4096, long)
+MAX_SHOWN_PATH = 1000
+
+
+def _shown(text: str, limit: int = MAX_SHOWN) -> str:
+    """`text` as a message shows it: in full up to `limit` characters,
+    otherwise its start and end around the number of characters left out."""
+    if len(text) <= limit:
+        return text
+    head, tail = text[:limit * 3 // 4], text[-(limit // 4):]
+    return f"{head}...({len(text) - len(head) - len(tail)} more characters)...{tail}"
+
+
+def _rv(v: Any) -> str:
+    """repr(v) (a string quoted, a number as written), shortened by _shown."""
+    return _shown(repr(v))
+
+
 def _join(path: str, key: str | int) -> str:
     if isinstance(key, int):
         return f"{path}[{key}]"
     if not _BARE_KEY.fullmatch(key):
         key = _toml_quote(key)       # as TOML quotes it: materials."a.b"
-    return f"{path}.{key}" if path else key
+    return f"{path}.{_shown(key)}" if path else _shown(key)
 
 
 def _check_keys(ctx: _Ctx, path: str, table: dict, allowed: set[str], kind: str = "") -> None:
@@ -279,9 +303,9 @@ def _float(ctx: _Ctx, path: str, v: Any, *, lo: float | None = None, hi: float |
     except OverflowError:  # a TOML integer too large for a double
         raise ctx.fail(path, "expected a finite number, got an integer too large for a float") from None
     if not math.isfinite(x):
-        raise ctx.fail(path, f"expected a finite number, got {v}")
+        raise ctx.fail(path, f"expected a finite number, got {_rv(v)}")
     if (lo is not None and (x <= lo if lo_open else x < lo)) or (hi is not None and (x >= hi if hi_open else x > hi)):
-        raise ctx.fail(path, f"expected a number {_range_text(lo, hi, lo_open, hi_open)}, got {v}")
+        raise ctx.fail(path, f"expected a number {_range_text(lo, hi, lo_open, hi_open)}, got {_rv(v)}")
     return x
 
 
@@ -299,7 +323,7 @@ def _int(ctx: _Ctx, path: str, v: Any, lo: int, hi: int) -> int:
     if isinstance(v, bool) or not isinstance(v, int):
         raise ctx.fail(path, f"expected an integer, got {_typename(v)}")
     if not lo <= v <= hi:
-        raise ctx.fail(path, f"expected an integer in {lo}..{hi}, got {v}")
+        raise ctx.fail(path, f"expected an integer in {lo}..{hi}, got {_rv(v)}")
     return v
 
 
@@ -307,7 +331,7 @@ def _str(ctx: _Ctx, path: str, v: Any, choices: tuple[str, ...] | None = None) -
     if not isinstance(v, str):
         raise ctx.fail(path, f"expected a string, got {_typename(v)}")
     if choices is not None and v not in choices:
-        raise ctx.fail(path, f"expected one of {', '.join(repr(c) for c in choices)}, got {v!r}")
+        raise ctx.fail(path, f"expected one of {', '.join(repr(c) for c in choices)}, got {_rv(v)}")
     return v
 
 
@@ -412,20 +436,26 @@ def _sky(ctx: _Ctx, t: dict, base_dir: Path | None) -> Sky:
         if not p.is_absolute():
             p = (base_dir or Path.cwd()) / p
         if p.suffix.lower() not in (".png", ".jpg", ".jpeg", ".pfm"):
-            raise ctx.fail("sky.image", f"expected a .png, .jpg, .jpeg or .pfm picture, got {s.image!r}")
-        if p.is_dir():
-            raise ctx.fail("sky.image", f"{p} is a folder, not a picture")
-        if p.exists() and not p.is_file():
-            # a device or a named pipe: decoding would read it forever or wait for a writer
-            raise ctx.fail("sky.image", f"{p} is not a regular file, not a picture")
-        if not p.is_file():
-            raise ctx.fail("sky.image", f"no such file: {p}")
+            raise ctx.fail("sky.image", f"expected a .png, .jpg, .jpeg or .pfm picture, got {_rv(s.image)}")
+        shown = _shown(printable(str(p)), MAX_SHOWN_PATH)
+        try:
+            if p.is_dir():
+                raise ctx.fail("sky.image", f"{shown} is a folder, not a picture")
+            if p.exists() and not p.is_file():
+                # a device or a named pipe: decoding would read it forever or wait for a writer
+                raise ctx.fail("sky.image", f"{shown} is not a regular file, not a picture")
+            if not p.is_file():
+                raise ctx.fail("sky.image", f"no such file: {shown}")
+        except OSError as e:
+            # what pathlib does not take for "no such file": a name too long
+            # for the file system, a folder on the way that cannot be searched
+            raise ctx.fail("sky.image", f"{shown}: cannot read: {e.strerror or e}") from None
         from .imageio import ImageReadError, read_sky_image   # (imageio imports this module)
 
         try:
             read_sky_image(p)
         except ImageReadError as e:
-            raise ctx.fail("sky.image", f"{p}: {e}") from None
+            raise ctx.fail("sky.image", f"{shown}: {e}") from None
         s.image_path = p
     return s
 
@@ -509,8 +539,8 @@ def _object(ctx: _Ctx, path: str, t: dict, materials: dict[str, Material]) -> Sc
         raise ctx.fail(_join(path, "material"), "required (a name from [materials])")
     mat = _str(ctx, _join(path, "material"), t["material"])
     if mat not in materials:
-        known = ", ".join(sorted(materials)) or "none defined"
-        raise ctx.fail(_join(path, "material"), f"unknown material {mat!r} (known: {known})")
+        known = _shown(", ".join(sorted(materials)), 5 * MAX_SHOWN) or "none defined"   # (a list: more room)
+        raise ctx.fail(_join(path, "material"), f"unknown material {_rv(mat)} (known: {known})")
     o = SceneObject(type=typ, material=mat)
     if "name" in t:
         o.name = _str(ctx, _join(path, "name"), t["name"])
@@ -589,7 +619,7 @@ def scene_from_dict(data: dict, source: str = "<scene>", base_dir: Path | None =
             o = _object(ctx, opath, _table(ctx, opath, ot), scene.materials)
             if o.name is not None:
                 if o.name in names:
-                    raise ctx.fail(_join(opath, "name"), f"duplicate object name {o.name!r}")
+                    raise ctx.fail(_join(opath, "name"), f"duplicate object name {_rv(o.name)}")
                 names.add(o.name)
             scene.objects.append(o)
     _check_limits(ctx, scene)
@@ -624,11 +654,20 @@ def resolve_scene_path(spec: str | os.PathLike | None) -> Path:
     if spec is None:
         return Path(str(resources.files(SCENES_PACKAGE) / f"{DEFAULT_SCENE_NAME}.toml"))
     p = Path(spec)
-    if p.exists() or p.suffix == ".toml" or os.sep in str(spec):
+    try:
+        exists = p.exists()
+    except OSError:
+        # a name too long for the file system (ENAMETOOLONG): not a built-in
+        # name either; reading it says what is wrong
+        return p
+    if exists or p.suffix == ".toml" or os.sep in str(spec):
         return p
     builtin = resources.files(SCENES_PACKAGE) / f"{spec}.toml"
-    if builtin.is_file():
-        return Path(str(builtin))
+    try:
+        if builtin.is_file():
+            return Path(str(builtin))
+    except OSError:
+        pass
     return p
 
 
@@ -641,12 +680,18 @@ def load_scene(spec: str | os.PathLike | None = None) -> Scene:
     if spec is not None and not str(spec).strip():
         raise SceneError(f"{str(spec)!r}: empty scene path (give a scene file or a built-in scene name)")
     path = resolve_scene_path(spec)
-    source = str(spec) if spec is not None else f"<default scene> {path}"
+    # (a name with a newline in it would break the one-line message)
+    source = printable(str(spec)) if spec is not None else f"<default scene> {path}"
     raw = _read_scene_file(path, source)
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as e:
         raise SceneError(f"{source}: not UTF-8 text ({e.reason} at byte {e.start})") from None
+    # A leading byte order mark (Windows Notepad writes one) marks the text as
+    # UTF-8; it is no part of the TOML (toml-test accepts it), and tomllib
+    # would reject it as "Invalid statement (at line 1, column 1)", an
+    # error at a character the user cannot see
+    text = text.removeprefix("\ufeff")
     try:
         data = tomllib.loads(text)
     except (ValueError, RecursionError) as e:  # TOMLDecodeError; an integer too long to convert; deep nesting
