@@ -199,3 +199,38 @@ def test_a_sky_image_path_too_long_for_the_file_system_is_a_bad_scene(tmp_path, 
     err = one_line_error(p, capsys)
     assert "sky.image: " in err and err.endswith(": cannot read: File name too long\n"), err[-200:]
     assert len(err) < 1500                  # the path shortened, not all 5000 characters of it
+
+
+# --------------------------------------------------------------------------- render's output name
+
+
+def test_an_output_name_too_long_for_the_file_system_is_one_message_before_rendering(tmp_path, capsys, gl):
+    # out.is_dir() raised ENAMETOOLONG: exit 1 with a bare OSError and the
+    # advice to run with --debug
+    out = tmp_path / ("a" * 300 + ".png")
+    rc = cli.main(["render", "-o", str(out), "--size", "8x8"])
+    _, err = capsys.readouterr()
+    assert rc == 1
+    assert err.count("\n") == 1 and err.endswith(": cannot write: File name too long\n"), err
+    assert "--debug" not in err and "OSError" not in err
+
+
+def test_an_output_name_with_a_newline_gives_a_one_line_message(tmp_path, capsys, gl):
+    rc = cli.main(["render", "-o", str(tmp_path / "no\nsuch" / "out.png"), "--size", "8x8"])
+    _, err = capsys.readouterr()
+    assert rc == 1
+    assert err.count("\n") == 1 and "no\\nsuch" in err and "does not exist" in err, err
+
+
+def test_a_name_the_terminal_cannot_encode_is_escaped_not_a_crash(tmp_path):
+    # PYTHONIOENCODING=ascii: print() of "naïve ☃" raised UnicodeEncodeError (exit 1)
+    import os
+    import subprocess
+    import sys
+
+    scene = tmp_path / "uni.toml"
+    scene.write_text('name = "na\u00efve \u2603"\n', encoding="utf-8")
+    r = subprocess.run([sys.executable, "-m", "viewer", "check", str(scene)], capture_output=True,
+                       env=dict(os.environ, PYTHONIOENCODING="ascii"), timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.startswith(b"na\\xefve \\u2603: 0 objects"), r.stdout

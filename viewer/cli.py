@@ -311,25 +311,34 @@ def _adaptive(args) -> bool:
 def cmd_render(args) -> int:
     from .imageio import OUTPUT_EXTENSIONS, write_image
 
+    from .scene import printable
+
     out = Path(args.output)
+    shown = printable(args.output)           # (a newline in the name would break the one-line message)
     if out.suffix.lower() not in OUTPUT_EXTENSIONS:
         what = f"unknown output extension {out.suffix!r}" if out.suffix else "no output extension"
-        raise UsageError(f"{args.output}: {what} (expected .png, .npy or .pfm)")
+        raise UsageError(f"{shown}: {what} (expected .png, .npy or .pfm)")
     scene = _load(args)
     parent = out.parent if str(out.parent) else Path(".")
     # every check of the output that is cheap and certain comes before the
     # render (which can take minutes); the atomic write stays the real one
-    if out.is_dir():
-        raise Failure(f"{args.output}: cannot write: it is a folder, not a file")
-    if not parent.is_dir():
-        what = "is a file, not a folder" if parent.exists() else "does not exist"
-        raise Failure(f"{args.output}: cannot write: folder {parent} {what}")
-    if not os.access(parent, os.W_OK):
-        raise Failure(f"{args.output}: cannot write: folder {parent} is not writable")
-    # the atomic write (a rename) would replace a read-only file: refuse, as a
-    # plain open() would
-    if out.is_file() and not os.access(out, os.W_OK):
-        raise Failure(f"{args.output}: cannot write: the file is read-only")
+    try:
+        if out.is_dir():
+            raise Failure(f"{shown}: cannot write: it is a folder, not a file")
+        if not parent.is_dir():
+            what = "is a file, not a folder" if parent.exists() else "does not exist"
+            raise Failure(f"{shown}: cannot write: folder {printable(str(parent))} {what}")
+        if not os.access(parent, os.W_OK):
+            raise Failure(f"{shown}: cannot write: folder {printable(str(parent))} is not writable")
+        # the atomic write (a rename) would replace a read-only file: refuse, as a
+        # plain open() would
+        if out.is_file() and not os.access(out, os.W_OK):
+            raise Failure(f"{shown}: cannot write: the file is read-only")
+    except OSError as e:
+        # what pathlib's tests raise instead of answering: a name too long
+        # for the file system (ENAMETOOLONG), a folder on the way that
+        # cannot be searched
+        raise Failure(f"{shown}: cannot write: {e.strerror or e}") from None
 
     adaptive = _adaptive(args)
     if args.view == "samples" and not adaptive:      # bad usage: before any OpenGL
@@ -414,7 +423,7 @@ def cmd_render(args) -> int:
     try:
         write_image(out, image)
     except OSError as e:
-        raise Failure(f"{args.output}: cannot write: {e.strerror or e}") from e
+        raise Failure(f"{shown}: cannot write: {e.strerror or e}") from e
     if timing is not None:
         print(timing, file=sys.stderr)       # the last line on stderr, whatever came before
     return 0
@@ -455,7 +464,7 @@ def time_frames(draw, repeat: int) -> list[float]:
 
 def _write_view(renderer, view: str, w: int, h: int, out: Path, samples_map=None) -> int:
     from .imageio import encode_npy, encode_pfm
-    from .scene import write_atomic
+    from .scene import printable, write_atomic
     from .views import picture, raw_view
 
     raw = raw_view(renderer, view, w, h, samples_map)
@@ -470,7 +479,7 @@ def _write_view(renderer, view: str, w: int, h: int, out: Path, samples_map=None
         else:
             write_atomic(out, encode_npy(raw) if out.suffix.lower() == ".npy" else encode_pfm(raw))
     except OSError as e:
-        raise Failure(f"{out}: cannot write: {e.strerror or e}") from e
+        raise Failure(f"{printable(str(out))}: cannot write: {e.strerror or e}") from e
     return 0
 
 
@@ -533,6 +542,11 @@ def main(argv: list[str] | None = None) -> int:
     if args.command is None:
         parser.print_help()
         return 0
+    # a scene name or path the terminal's encoding cannot show (a snowman
+    # under PYTHONIOENCODING=ascii) is written escaped, not a crash
+    for stream in (sys.stdout, sys.stderr):
+        if hasattr(stream, "reconfigure"):
+            stream.reconfigure(errors="backslashreplace")
     from .imageio import SkyImageError
     from .scene import SceneError
     from .shaders import ShaderError
