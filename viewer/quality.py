@@ -15,27 +15,32 @@ pixels:
   a small framebuffer show exactly those pixels of the W x H image), so the
   error is the error at the real size: a scaled-down picture would count
   edges, where the sampling error lives, many times over.  The candidates
-  take point samples: a mosaic's pixel corners are not the image's, so the
-  footprint samples ``glassray render`` takes from two samples on
-  (Renderer.render) are not applied.  On a scene with a checkered plane the
-  error measured for more than one sample therefore includes the checker's
-  aliasing that render's footprint samples remove: it overstates render's
-  error, and the choice errs on the safe side (it may pick a slower
-  candidate than needed).
+  take the samples ``glassray render`` takes (Renderer.render): one sample
+  is the centred point sample; from two samples on, on a scene with a
+  checkered plane, footprint samples (shaders/lib/footprint.glsl) with the
+  full image's footprint mask for the measured pixels
+  (:meth:`Measurement._footprint_mask`), so the checker's aliasing, which
+  render's footprint samples remove, is not counted.  (Measured with point
+  samples, glass-sphere at 160x90 gave 16 samples 0.0124 where the render's
+  error was 0.0049.)
 * **reference**: the scene's own shader with max depth 16 and min weight
   1e-4 (the bench's reference trace settings; going deeper changes the
-  default scene by about 4e-4 RMSE) and :data:`REFERENCE_SAMPLES` samples:
-  the mean of two independent stratified patterns of half as many (seeds 1
-  and 2; the candidates use seed 0, as ``glassray render`` does), whose
-  difference estimates the reference's own noise (``noise`` = RMSE(A - B) /
-  2, reported).  Not min weight 0: on the glass of water it is ten times
-  slower (4.6 s against 0.44 s a sample at 160x90 on llvmpipe) for a change
-  far below that noise.  Not the float64 NumPy tracer
+  default scene by about 4e-4 RMSE) and :data:`REFERENCE_SAMPLES` samples,
+  footprint samples as above where the scene has a checkered plane (the
+  same limit as point samples, the box-filtered pixel, with far less noise
+  on the checker): the mean of two independent stratified patterns of half
+  as many (seeds 1 and 2; the candidates use seed 0, as ``glassray render``
+  does), whose difference estimates the reference's own noise (``noise`` =
+  RMSE(A - B) / 2, reported).  Not min weight 0: on the glass of water it
+  is ten times slower (4.6 s against 0.44 s a sample at 160x90 on llvmpipe)
+  for a change far below that noise.  Not the float64 NumPy tracer
   (``bench.reference_image``): the GPU already agrees with it
   (tests/test_gpu_vs_reference.py) and it is one to two orders of magnitude
   slower; what is measured here is convergence in samples, depth and weight.
-  Measured errors include the reference's noise, so a budget below it
-  cannot be resolved.
+  Measured errors include the reference's noise (they are not corrected
+  for it: the estimate above is low where the two patterns' errors
+  correlate, and at 64 samples the correction moved the errors by less than
+  the mosaic's own sampling error), so a budget below it cannot be resolved.
 * **time**: the whole picture scaled down to the same number of pixels (its
   cost per pixel is the full image's: the mean rays per pixel agree), a
   warm-up pass then :data:`MIN_TIMED_PASSES` timed passes of one sample,
@@ -80,12 +85,14 @@ TRACE = ((2, 0.01), (4, 0.003), (6, 0.001), (10, 0.0001))
 #: this many pixels in all (a smaller image is measured whole).
 MEASURE_PIXELS = 160 * 90
 GRID = 8
-#: Reference: samples (seed and trace settings are the bench's).
-REFERENCE_SAMPLES = 32
+#: Reference: samples (seed and trace settings are the bench's).  64, not 32:
+#: at 32 (two patterns of 16) its own error on glass-sphere at 160x90 was
+#: 0.0042, close to a 16-sample render's 0.0050, and 16 samples measured 0.0074.
+REFERENCE_SAMPLES = 64
 #: Timed passes per (max depth, min weight) at least.
 MIN_TIMED_PASSES = 5
 #: Bumped when the measuring method changes (old cache files are then ignored).
-METHOD_VERSION = 1
+METHOD_VERSION = 2
 #: Seed of the candidates' sample pattern (glassray render's default).
 RENDER_SEED = 0
 
@@ -393,6 +400,11 @@ def _window_renderer_class():
         changed so that the shader's own formula gives exactly that ray."""
         full: tuple[int, int] | None = None
         shift: tuple[int, int] = (0, 0)
+        #: the mosaic's footprint mask (RG32F, the framebuffer's size; see
+        #: Measurement._footprint_mask): while set, the window's samples are
+        #: footprint samples, as Renderer.render takes them
+        footprint_mask = None
+
         @property
         def cull(self):   # a window's tiles are not the scene camera's: cull only the whole picture
             return self.full is None
@@ -418,10 +430,23 @@ def _window_renderer_class():
             # the driver's loop limit cut short with -inf (CUT_CHECK, as
             # Renderer.render does): the measurement leaves those pixels out
             # instead of taking a tree cut short for the converged image.
-            if self.full is None or not self._defines.get("HAS_DIELECTRIC"):
+            # With a footprint mask set, the variant and the mask Renderer.render
+            # draws its samples of two or more with (FOOTPRINT_SAMPLES).
+            glass = bool(self._defines.get("HAS_DIELECTRIC"))
+            if self.full is None or not (glass or self.footprint_mask is not None):
                 return super().draw_sample(width, height, offset, viewport, compile)
-            self.draw_groups([(self.variant(CUT_CHECK=1), [(0, 0, width, height)])], width, height, offset,
-                             viewport)
+            from .adaptive import AdaptiveSampler
+
+            mask = self.footprint_mask
+            defines = {**({"CUT_CHECK": 1} if glass else {}),
+                       **(AdaptiveSampler.FOOTPRINT_SAMPLES if mask is not None else {})}
+
+            def bind_mask(prog):
+                if mask is not None and "footprintMask" in prog:
+                    mask.use(location=AdaptiveSampler.FOOTPRINT_UNIT)
+                    prog["footprintMask"].value = AdaptiveSampler.FOOTPRINT_UNIT
+            self.draw_groups([(self.variant(**defines), [(0, 0, width, height)])], width, height, offset,
+                             viewport, bind_mask)
 
     return WindowRenderer
 
@@ -455,7 +480,8 @@ class Measurement:
             by_trace.setdefault((c.max_depth, c.min_weight), []).append(c.samples)
         self._by_trace = by_trace
         self.total = ((REFERENCE_SAMPLES + 1 if reference is None else 0)
-                      + sum(2 + MIN_TIMED_PASSES + sum(ss) for ss in by_trace.values()))
+                      + sum(2 + MIN_TIMED_PASSES + sum(ss) for ss in by_trace.values())
+                      + (len(lay.tiles) if reference is None or any(c.samples > 1 for c in self.todo) else 0))
         self.steps_done = 0
         self.done = not self.todo
         self.saved = False  # finish() wrote what was measured to the cache
@@ -465,6 +491,7 @@ class Measurement:
         self.cut_pixels = cut_pixels
         self._renderer = None
         self._fbo = self._timing_fbo = None
+        self._footprint_tex = None   # the mosaic's footprint mask (_footprint_mask)
         self._gen: Iterator[None] | None = None if self.done else self._run()
 
     @property
@@ -518,6 +545,9 @@ class Measurement:
         self.done = True
 
     def _release(self) -> None:
+        if self._footprint_tex is not None:
+            self._footprint_tex.release()
+            self._footprint_tex = None
         if self._renderer is not None:
             self._renderer.release()
             self._renderer = None
@@ -554,6 +584,43 @@ class Measurement:
             ctx.disable(moderngl.BLEND)
             yield
 
+    def _footprint_mask(self) -> Iterator[None]:
+        """The footprint mask of the mosaic (self._footprint_tex, None where
+        the scene takes no footprint samples): for each measured pixel what
+        Renderer.render's (AdaptiveSampler.direct_footprints of the W x H
+        image) holds for it, the checkered plane its four corner rays meet
+        first and its closed-form share.  Both are functions of the rays
+        through the pixel's corners, which the window's camera vectors give
+        for the tile's pixels (WindowRenderer.bind), so each tile's mask is
+        direct_footprints run on a tile-sized window (equal to the full
+        image's up to float32 rounding of the shares: checked in
+        tests/test_quality_footprint.py); the tiles' masks are then placed
+        as the mosaic places the tiles.  A yield per tile."""
+        from .adaptive import AdaptiveSampler, drain, footprint_default, footprint_planes
+
+        r, lay = self._renderer, self.layout
+        if not footprint_default(r.scene):
+            return
+        W, H = lay.size
+        texels = np.zeros((H, W, 2), np.float32)      # rows bottom first, as the texture's
+        tw, th = lay.tiles[0][2:]
+        sampler = AdaptiveSampler(r, tw, th, footprint=True)
+        try:
+            for (x0, y0, tw, th), (px, py) in zip(lay.tiles, lay.packed):
+                r.full, r.shift = lay.full, (x0, y0)
+                obj = drain(sampler.corner_objects())
+                sampler.set_footprint(footprint_planes(r.scene, obj))
+                drain(sampler.share_pass())
+                texels[H - py - th:H - py, px:px + tw] = sampler._footprint_texels
+                yield
+        finally:
+            sampler.release()
+        tex = self.ctx.texture((W, H), 2, texels.tobytes(), dtype="f4")
+        import moderngl
+
+        tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        self._footprint_tex = tex
+
     def _read(self, n: int) -> np.ndarray:
         w, h = self.layout.size
         raw = self._fbo.read(components=4, dtype="f4")
@@ -584,12 +651,16 @@ class Measurement:
             # REFERENCE_SEED and REFERENCE_SEED + 1): their mean is the reference,
             # their difference estimates its own sampling noise
             half = REFERENCE_SAMPLES // 2
+            if self._renderer.takes_footprint(half):
+                yield from self._footprint_mask()
+                self._renderer.footprint_mask = self._footprint_tex
             self._clear()
             yield from self._accumulate(sample_offsets(half, REFERENCE_SEED))
             a = self._read(half)
             self._clear()
             yield from self._accumulate(sample_offsets(half, REFERENCE_SEED + 1))
             b = self._read(half)
+            self._renderer.footprint_mask = None
             keep = _uncut(a) & _uncut(b)
             with np.errstate(invalid="ignore"):          # -inf + -inf, -inf - -inf: left out
                 self.reference = np.where(keep[..., None], (a + b) / 2, np.nan)
@@ -607,8 +678,15 @@ class Measurement:
             yield from self._timed_passes(1 + MIN_TIMED_PASSES, timings)
             per_pass = statistics.median(timings[1:])  # the first is a warm-up
             for n in sample_counts:
+                # footprint samples where Renderer.render takes them (two
+                # samples or more on a checkered plane), with its mask
+                footprint = self._renderer.takes_footprint(n)
+                if footprint and self._footprint_tex is None:
+                    yield from self._footprint_mask()
+                self._renderer.footprint_mask = self._footprint_tex if footprint else None
                 self._clear()
                 yield from self._accumulate(sample_offsets(n, RENDER_SEED))
+                self._renderer.footprint_mask = None
                 image = self._read(n)
                 keep = _uncut(image) & np.isfinite(self.reference).all(axis=-1)
                 self.cut_pixels = max(self.cut_pixels, int(keep.size - np.count_nonzero(keep)))
