@@ -1493,7 +1493,10 @@ class AdaptiveRender:
         if moving is not None:
             total = total.copy()
             total.reshape(-1, 4)[moving[0]] = moving[1]
-        return (total[..., :3] / np.maximum(total[..., 3:], 1)).astype(np.float32)
+        from .renderer import clamp_radiance
+
+        # (footprint samples: a pixel's mean of few can be below 0, Renderer.render's clamp_radiance)
+        return clamp_radiance((total[..., :3] / np.maximum(total[..., 3:], 1)).astype(np.float32))
 
     def result(self) -> "AdaptiveResult":
         return AdaptiveResult(np.ascontiguousarray(self.image()), self.spp, list(self.rounds), self.spent)

@@ -39,6 +39,23 @@ def intersect_rect(a: tuple[int, int, int, int], b: tuple[int, int, int, int]) -
     return (x0, y0, x1 - x0, y1 - y0) if x1 > x0 and y1 > y0 else None
 
 
+
+def cut_marks(image: np.ndarray) -> np.ndarray:
+    """Where a sum of samples holds one cut short by the driver's loop limit
+    (shaders/trace.frag, CUT_CHECK: -inf, or NaN where it met a +inf)."""
+    return np.isnan(image) | np.isneginf(image)
+
+
+def clamp_radiance(image: np.ndarray) -> np.ndarray:
+    """The image with every value below 0 set to 0, in place.  Radiance is
+    never negative, but a pixel's mean of few footprint samples can be: the
+    checker's share is a control variate, c_bar L(x) + (c(x) - c_bar)(L(x) -
+    L_ref), unbiased but not bounded below (the default scene at 320x180, 2
+    samples: one pixel at -0.041 where the shadow's edge and a checker line
+    cross it).  +inf (beyond float32) stays."""
+    np.maximum(image, 0.0, out=image)
+    return image
+
 class Renderer:
     #: Draw the specialised shader per group of screen tiles, each with the
     #: objects its rays can meet (viewer/culling.py).  Off for renderers
@@ -401,7 +418,8 @@ class Renderer:
     def render(self, width: int, height: int, samples: int | None = None, seed: int = 0,
                progress: Callable[[int, int], None] | None = None,
                footprint: bool | None = None) -> np.ndarray:
-        """(H, W, 3) float32 linear RGB, exposure applied, first row = top.
+        """(H, W, 3) float32 linear RGB, exposure applied, first row = top,
+        never below 0 (clamp_radiance).
 
         footprint: footprint samples (shaders/lib/footprint.glsl): where a
         pixel's four corner rays all meet one checkered plane first, a
@@ -478,16 +496,18 @@ class Renderer:
         finally:
             ctx.disable(moderngl.BLEND)
         image = self._read_rgb(fbo, samples)
-        # a sample cut short is -inf (shaders/trace.frag, CUT_CHECK): every
-        # radiance is >= 0, so anything else (-inf, or NaN where it met an
-        # inf) marks it; about 1 ms at 1280x720
-        if check and not (image[..., 0] >= 0).all():
+        # a sample cut short is -inf (shaders/trace.frag, CUT_CHECK), and
+        # stays -inf in the sum (or NaN where it met an inf); about 1 ms at
+        # 1280x720.  (Not "anything below 0": a footprint sample is a control
+        # variate, and a pixel's mean of few of them can be below 0, which
+        # sent the default scene's 2-sample render to the passes, 5x slower.)
+        if check and cut_marks(image[..., 0]).any():
             self._force_resume = True
             try:
                 return self.render(width, height, samples, seed, progress, footprint)
             finally:
                 self._force_resume = False
-        return image
+        return clamp_radiance(image)
 
     #: Nodes of a ray tree one resumable pass traces at most, to begin with
     #: (shaders/trace.frag, RESUME): well below what ends a shader on
