@@ -72,3 +72,12 @@ def test_an_adaptive_image_is_clamped_too():
     got = a.image()
     np.testing.assert_allclose(got, [[[0.0, 0.1, 0.2], [0.3, 0.3, 0.3]]], rtol=1e-6)
 
+
+def test_the_quality_mosaic_does_not_take_a_negative_mean_for_a_cut_tree():
+    from viewer.quality import _uncut
+
+    img = np.zeros((1, 3, 3))
+    img[0, 0] = -0.041
+    img[0, 1] = -np.inf
+    img[0, 2, 1] = np.nan
+    assert _uncut(img).tolist() == [[True, False, False]]

@@ -837,7 +837,8 @@ class Viewer:
             self.controls.changed = True
         self.quality_status = (f"max error {choice.max_error:.4g}: " + ("" if choice.met else "not reached, ")
                                + f"{c.samples} spp, depth {c.max_depth}, w {c.min_weight:g} "
-                               f"(RMSE {choice.measured.rmse:.3g})"
+                               f"(RMSE {choice.measured.rmse:.3g}"
+                               + (f" +- {choice.measured.rmse_se:.2g})" if choice.measured.rmse_se > 0 else ")")
                                + (f"; {choice.cut_pixels} pixels left out: trees cut by the driver"
                                   if choice.cut_pixels else ""))
         self._say(self.quality_status)
