@@ -227,7 +227,7 @@ def gpu_frame_scene(scene: Scene) -> tuple[Scene, int]:
 # product, so that a source beyond float32 (saturated) still makes inf and
 # the ordinary ones keep their values.  An ordinary scene has r = 0 (bit for
 # bit the same).
-RADIANCE_TOP = 100
+RADIANCE_TOP = 120
 EXPOSURE_TOP = 100
 
 
@@ -276,15 +276,18 @@ def colour_balance(m) -> int:
     (C * k), so a colour of 1e39 (about 1 on the GPU, the k times 2^130)
     or a diffuse of 1e39 keeps its pixels of 8e37 instead of saturating
     to a third of them.  The colour to about 1 where the largest k stays
-    within 2^100 and the smallest colour channel above 2^-100; 0 (bit for
-    bit the same) for any ordinary material."""
+    within 2^120 and the smallest colour channel above 2^-100; 0 (bit for
+    bit the same) for any ordinary material.  (The k's limit was 2^100, and
+    the sources' top 2^100 too: a specular of 1e48 beside a diffuse of 1
+    then left the diffuse and ambient terms at 2^-121, flushed to 0; with
+    120 both, specular to about 1e50 keeps them.)"""
     colours = (*m.color, *(m.checker.color if m.checker else ()))
     ec = _top_exponent(colours)
     ek = _top_exponent((m.ambient, m.diffuse, m.specular))
     if ec is None or ek is None or (-60 <= ec <= 60 and -60 <= ek <= 60):
         return 0
     ec_min = math.frexp(min(c for c in colours if c > 0))[1]
-    return min(ec, 100 - ek, ec_min + 100)
+    return min(ec, 120 - ek, ec_min + 100)
 
 
 def _saturate(a: np.ndarray) -> np.ndarray:
