@@ -15,23 +15,11 @@ import numpy as np
 import pytest
 
 from conftest import make_scene
+from test_views_audit import _labels  # the legend's labels as drawn
 from viewer import quality as q
 from viewer import views
 
 
-def _labels(monkeypatch, view: str, raw: np.ndarray) -> list[str]:
-    from PIL import ImageDraw
-
-    drawn: list[str] = []
-    original = ImageDraw.ImageDraw.text
-
-    def text(self, xy, s, *args, **kwargs):
-        drawn.append(s)
-        return original(self, xy, s, *args, **kwargs)
-
-    monkeypatch.setattr(ImageDraw.ImageDraw, "text", text)
-    views.picture(view, raw)
-    return drawn
 
 
 def _depth_raw(values: np.ndarray) -> np.ndarray:
