@@ -24,6 +24,21 @@ def test_cut_marks_are_minus_infinity_and_nan_only():
     assert out.tolist() == [0.0, 0.0, 0.25, np.inf]
 
 
+def test_clamping_takes_a_read_only_read_back(gl):
+    # a 1x1 one-sample render's read-back is a read-only view of the
+    # driver's bytes: the clamp raised "output array is read-only"
+    v = np.frombuffer(np.array([-0.5, 0.25, 0.5], np.float32).tobytes(), np.float32)
+    assert not v.flags.writeable
+    assert clamp_radiance(v).tolist() == [0.0, 0.25, 0.5]
+    r = Renderer(gl, load_scene("glass-sphere"))
+    try:
+        for w, h in ((1, 1), (2, 1), (3, 2)):
+            img = r.render(w, h, 1)
+            assert img.shape == (h, w, 3) and img.min() >= 0
+    finally:
+        r.release()
+
+
 def test_a_negative_footprint_mean_is_clamped_and_not_taken_for_a_cut_tree(gl, monkeypatch):
     r = Renderer(gl, load_scene("default"))
     try:

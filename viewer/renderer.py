@@ -52,7 +52,10 @@ def clamp_radiance(image: np.ndarray) -> np.ndarray:
     checker's share is a control variate, c_bar L(x) + (c(x) - c_bar)(L(x) -
     L_ref), unbiased but not bounded below (the default scene at 320x180, 2
     samples: one pixel at -0.041 where the shadow's edge and a checker line
-    cross it).  +inf (beyond float32) stays."""
+    cross it).  +inf (beyond float32) stays.  A read-only array (a
+    read-back viewed in place) is copied first."""
+    if not image.flags.writeable:
+        image = image.copy()
     np.maximum(image, 0.0, out=image)
     return image
 
