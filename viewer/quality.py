@@ -27,13 +27,13 @@ pixels:
   min weight leave (truncation: what a tree cut shallower misses) lives in
   a few pixels (on the default scene at 640x360, 1% of the pixels hold
   70% of the squared error), which a sample of tiles meets by chance (over
-  300 layouts the 4-sample depth-6 RMSE measured 0.008 to 0.023 for a whole
-  image's 0.0172).  So each (max depth, min weight) and the reference's
+  300 layouts the 4-sample depth-6 RMSE measured 0.008 to 0.023, 10th to
+  90th percentile, for a whole image's 0.0172).  So each (max depth, min weight) and the reference's
   are also drawn with one centred sample over the whole image, and a
   candidate's mean squared error is the mosaic's minus the mosaic's part
   of the centred samples' squared difference plus the whole image's
   (:meth:`Measurement._centre_full`): over the same layouts 0.0164 to
-  0.0176.  The pick holds the RMSE plus its standard error (the tiles'
+  0.0176 (10th to 90th percentile).  The pick holds the RMSE plus its standard error (the tiles'
   spread of what is left: :func:`tile_standard_error`) against the budget.
 * **reference**: the scene's own shader with max depth 16 and min weight
   1e-4 (the bench's reference trace settings; going deeper changes the
@@ -557,7 +557,8 @@ class Measurement:
         self.total = ((REFERENCE_SAMPLES + 1 if reference is None else 0)
                       + sum(2 + MIN_TIMED_PASSES + sum(ss) for ss in by_trace.values())
                       + (len(lay.tiles) if reference is None or any(c.samples > 1 for c in self.todo) else 0)
-                      + (0 if len(lay.tiles) < 2 else (1 + len(by_trace)) * (1 + _bands(lay.full))))
+                      # the control variate's centred passes: the mosaic (1), the image's bands and its read
+                      + (0 if len(lay.tiles) < 2 else (1 + len(by_trace)) * (2 + _bands(lay.full))))
         self.steps_done = 0
         self.done = not self.todo
         self.saved = False  # finish() wrote what was measured to the cache
