@@ -39,7 +39,6 @@ def intersect_rect(a: tuple[int, int, int, int], b: tuple[int, int, int, int]) -
     return (x0, y0, x1 - x0, y1 - y0) if x1 > x0 and y1 > y0 else None
 
 
-
 def cut_marks(image: np.ndarray) -> np.ndarray:
     """Where a sum of samples holds one cut short by the driver's loop limit
     (shaders/trace.frag, CUT_CHECK: -inf, or NaN where it met a +inf)."""
@@ -58,6 +57,7 @@ def clamp_radiance(image: np.ndarray) -> np.ndarray:
         image = image.copy()
     np.maximum(image, 0.0, out=image)
     return image
+
 
 class Renderer:
     #: Draw the specialised shader per group of screen tiles, each with the
