@@ -133,3 +133,32 @@ def test_the_truncation_control_variate_measures_the_whole_image(gl, renderer): 
     tiles = [np.mean(np.mean((img - ref)[py:py + th, px:px + tw] ** 2, axis=-1) - t_mosaic[py:py + th, px:px + tw])
              for (_x, _y, tw, th), (px, py) in zip(lay.tiles, lay.packed)]
     assert got.rmse_se == pytest.approx(np.std(tiles, ddof=1) / 4 / (2 * got.rmse), rel=1e-2)
+
+
+def test_a_candidate_s_time_is_that_of_the_render_it_stands_for(gl, monkeypatch):  # noqa: F811
+    """The time model (viewer/quality.py, Measurement._run): one sample is
+    the median pass plus a read-back; two or more on a checkered plane are
+    timed with footprint samples plus their mask made once, as
+    Renderer.render draws them.  The timers are replaced by fixed values so
+    that the model's arithmetic can be checked exactly."""
+    scene = scene_of("ball")
+    lay = q.layout(64, 36)
+    assert lay.timing_size == lay.full                     # timed at its own size
+
+    def passes(self, count, timings):
+        timings.extend([99.0] + [10.0] * (count - 1))        # a slow warm-up, then 10 ms
+        yield
+
+    def footprint(self, count, timings):
+        timings.extend([99.0] + [12.0] * (count - 1))
+        yield
+        return 30.0                                          # the mask
+
+    monkeypatch.setattr(q.Measurement, "_timed_passes", passes)
+    monkeypatch.setattr(q.Measurement, "_timed_footprint", footprint)
+    monkeypatch.setattr(q.Measurement, "_timed_readback", lambda self: 2.0)
+    cands = [q.Candidate(1, 4, 0.01), q.Candidate(2, 4, 0.01), q.Candidate(8, 4, 0.01)]
+    meas = q.Measurement(gl, scene, lay, cands)
+    meas.run()
+    got = {c.samples: meas.measured[c.key()].time_ms for c in cands}
+    assert got == {1: 10.0 + 2.0, 2: 30.0 + 2 * 12.0 + 2.0, 8: 30.0 + 8 * 12.0 + 2.0}

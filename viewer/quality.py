@@ -53,11 +53,18 @@ pixels:
   for it: the estimate above is low where the two patterns' errors
   correlate, and at 64 samples the correction moved the errors by less than
   the mosaic's own sampling error), so a budget below it cannot be resolved.
-* **time**: the whole picture scaled down to the same number of pixels (its
-  cost per pixel is the full image's: the mean rays per pixel agree), a
-  warm-up pass then :data:`MIN_TIMED_PASSES` timed passes of one sample,
-  each finished on the GPU; a candidate's time is the median pass x its
-  samples x (full pixels / measured pixels): an estimate of one W x H frame.
+* **time**: the whole picture, at its own size up to
+  :data:`FULL_TIMING_PIXELS` (a warm-up pass then :data:`FULL_TIMED_PASSES`
+  timed passes of one sample), larger ones scaled down to the same number
+  of pixels as measured (its cost per pixel is the full image's: the mean
+  rays per pixel agree; :data:`MIN_TIMED_PASSES` passes), each finished on
+  the GPU; a candidate's time is (the median pass x its samples + one
+  read-back of the picture) x (full pixels / timed pixels): an estimate of
+  one W x H frame as ``glassray render --timing`` measures it.  (Scaled
+  down below that size, a pass's fixed cost was scaled up with the pixels:
+  the default scene at 640x360 was estimated 20-40% slow.)  A candidate
+  that takes footprint samples is timed with them, and with its picture's
+  mask made once (:meth:`Measurement._timed_footprint`).
 
 The measurements are cached as JSON (the reference as .npy beside it) in
 ``$XDG_CACHE_HOME/glassray/quality`` (default ``~/.cache/glassray/quality``),
@@ -104,10 +111,15 @@ REFERENCE_SAMPLES = 64
 #: Pixels a band of a whole-image pass of the truncation control variate
 #: traces at most (Measurement._centre_full).
 FULL_BAND_PIXELS = 1280 * 48
+#: Images of at most this many pixels are timed at their own size (and
+#: FULL_TIMED_PASSES passes), larger ones scaled down to about
+#: MEASURE_PIXELS (MIN_TIMED_PASSES passes).
+FULL_TIMING_PIXELS = 1280 * 720
+FULL_TIMED_PASSES = 3
 #: Timed passes per (max depth, min weight) at least.
 MIN_TIMED_PASSES = 5
 #: Bumped when the measuring method changes (old cache files are then ignored).
-METHOD_VERSION = 3
+METHOD_VERSION = 4
 #: Seed of the candidates' sample pattern (glassray render's default).
 RENDER_SEED = 0
 
@@ -229,7 +241,11 @@ def layout(width: int, height: int, pixels: int = MEASURE_PIXELS, grid: int = GR
     if width * height <= pixels * 1.25:
         return Layout((width, height), (width, height), ((0, 0, width, height),), ((0, 0),), (width, height))
     f = math.sqrt(pixels / (width * height))
-    timing = (max(1, round(width * f)), max(1, round(height * f)))
+    # timed at the real size up to FULL_TIMING_PIXELS: scaled down, a pass's
+    # fixed cost (draw calls, the GPU's finish) was scaled up with the
+    # pixels, and the default scene's estimates at 640x360 ran 20-40% high
+    timing = ((width, height) if width * height <= FULL_TIMING_PIXELS
+              else (max(1, round(width * f)), max(1, round(height * f))))
     tw = max(1, min(width // grid, round(width * f / grid)))
     th = max(1, min(height // grid, round(height * f / grid)))
     rng = np.random.default_rng(width * 100003 + height)
@@ -555,7 +571,8 @@ class Measurement:
             by_trace.setdefault((c.max_depth, c.min_weight), []).append(c.samples)
         self._by_trace = by_trace
         self.total = ((REFERENCE_SAMPLES + 1 if reference is None else 0)
-                      + sum(2 + MIN_TIMED_PASSES + sum(ss) for ss in by_trace.values())
+                      + sum(2 + 2 * (FULL_TIMED_PASSES if lay.timing_size == lay.full else MIN_TIMED_PASSES)
+                            + sum(ss) + 2 for ss in by_trace.values())
                       + (len(lay.tiles) if reference is None or any(c.samples > 1 for c in self.todo) else 0)
                       # the control variate's centred passes: the mosaic (1), the image's bands and its read
                       + (0 if len(lay.tiles) < 2 else (1 + len(by_trace)) * (2 + _bands(lay.full))))
@@ -775,8 +792,18 @@ class Measurement:
                 t_full = _squared_difference(((yield from self._centre_full())), ref_full)
                 t_full_mean = float(np.mean(t_full[np.isfinite(t_full)])) if np.isfinite(t_full).any() else 0.0
             timings: list[float] = []
-            yield from self._timed_passes(1 + MIN_TIMED_PASSES, timings)
+            passes = FULL_TIMED_PASSES if self.layout.timing_size == self.layout.full else MIN_TIMED_PASSES
+            yield from self._timed_passes(1 + passes, timings)
             per_pass = statistics.median(timings[1:])  # the first is a warm-up
+            # and what a render does once whatever its samples: read the image back
+            readback = self._timed_readback()
+            # a render of two samples or more on a checkered plane: its
+            # footprint mask once, and footprint samples (Renderer.render)
+            footprint_once = footprint_pass = None
+            if any(self._renderer.takes_footprint(n) for n in sample_counts):
+                timings = []
+                footprint_once = yield from self._timed_footprint(1 + passes, timings)
+                footprint_pass = statistics.median(timings[1:])
             for n in sample_counts:
                 # footprint samples where Renderer.render takes them (two
                 # samples or more on a checkered plane), with its mask
@@ -800,7 +827,9 @@ class Measurement:
                 se = tile_standard_error(image, self.reference, keep, self.layout, err["rmse"],
                                          t_mosaic if control else None)
                 c = Candidate(n, d, wgt)
-                self.measured[c.key()] = Measured(c, n * per_pass * scale, err["rmse"], err["frac_off"], se)
+                t = (n * per_pass + readback if footprint_pass is None or not footprint
+                     else footprint_once + n * footprint_pass + readback)
+                self.measured[c.key()] = Measured(c, t * scale, err["rmse"], err["frac_off"], se)
 
     def _centre_mosaic(self):
         """One centred point sample of the mosaic with the scene as set
@@ -837,6 +866,42 @@ class Measurement:
         img = np.frombuffer(raw, dtype=np.float32).reshape(H, W, 4)[::-1, :, :3]
         yield
         return np.asarray(img, dtype=np.float64)
+
+    def _timed_footprint(self, count: int, timings: list[float]):
+        """As _timed_passes, with the footprint samples Renderer.render draws
+        from two samples on: the mask of the timing picture made (timed, and
+        returned: ms), then `count` passes of footprint samples."""
+        from .adaptive import AdaptiveSampler
+
+        ctx, r = self.ctx, self._renderer
+        tw, th = self.layout.timing_size
+        r.full, r.footprint_mask = None, None
+        r.footprint_sampler(tw, th)               # its targets and programs made, untimed
+        yield
+        ctx.finish()
+        t0 = time.perf_counter()
+        fp = r.footprint_sampler(tw, th)
+        ctx.finish()
+        mask_ms = (time.perf_counter() - t0) * 1000.0
+        yield
+        groups = r.programs_for(tw, th, compile_all=True, **AdaptiveSampler.FOOTPRINT_SAMPLES)
+        for _ in range(count):
+            ctx.finish()
+            t0 = time.perf_counter()
+            self._timing_fbo.use()
+            r.draw_groups(groups, tw, th, (0.5, 0.5), None, fp.bind_footprint)
+            ctx.finish()
+            timings.append((time.perf_counter() - t0) * 1000.0)
+            yield
+        return mask_ms
+
+    def _timed_readback(self) -> float:
+        """ms of reading the timing picture back as Renderer.render does (RGB
+        float32): a render's cost that does not grow with its samples."""
+        self.ctx.finish()
+        t0 = time.perf_counter()
+        self._timing_fbo.read(components=3, dtype="f4")
+        return (time.perf_counter() - t0) * 1000.0
 
     def _timed_passes(self, count: int, timings: list[float]) -> Iterator[None]:
         """Centred samples of the whole picture at the timing size, each
