@@ -772,7 +772,8 @@ class Measurement:
             self.cut_pixels = int(keep.size - np.count_nonzero(keep))
             self.noise = float(np.sqrt(np.mean((a[keep] - b[keep]) ** 2)) / 2) if keep.any() else float("nan")
             self.rendered_reference = True
-        # time of a whole frame: the scaled-down picture's time scaled to all pixels
+        # time of a whole frame: the timing picture's (the image itself up to
+        # FULL_TIMING_PIXELS, else scaled down) scaled to all pixels
         scale = self.layout.full[0] * self.layout.full[1] / (self.layout.timing_size[0] * self.layout.timing_size[1])
         tw, th = self.layout.timing_size
         self._timing_fbo = self.ctx.simple_framebuffer((tw, th), components=4, dtype="f4")
