@@ -12,6 +12,15 @@ no objects: clear, draw calls, read-back) plus every ray at the cheapest
 group's price. No change to how the rays are scheduled can beat that
 without tracing fewer rays, that is without changing the image.
 
+Each group's line also gives its SIMD waste: llvmpipe shades a 4x2 block
+of pixels as one group of 8 lanes (`tools/llvmpipe_branches.py`), whose
+loops run until its slowest lane is done, so the block costs about 8 times
+its pixel with the most rays; the waste is the sum of that over the
+group's blocks against the rays it traces (a pixel's rays stand for
+its lane's work).  A small waste means that the
+time goes into the code each ray runs, not into lanes left idle, and no
+regrouping of pixels (sorting rays, compaction) has much to win.
+
 Usage (repository root, the project's virtual environment)::
 
     python tools/frame_budget.py [SCENE] [WxH]
@@ -24,6 +33,23 @@ import moderngl
 from _frame_groups import median_time, timed_groups
 from viewer.renderer import Renderer
 from viewer.scene import load_scene
+
+
+def simd_waste(rays, rects, height: int) -> float:
+    """8 x the most rays of each whole 4x2 block (llvmpipe's SIMD group) of
+    the rectangles, summed, against the rays they trace, minus 1.  The
+    rectangles are culling tiles, whole 4x2 blocks but at the image's
+    right and top edges, whose partial blocks are left out."""
+    busiest = traced = 0
+    for x, y, w, h in rects:
+        block = rays[height - y - h:height - y, x:x + w]
+        # blocks are counted from OpenGL's bottom-left corner: a partial
+        # row is the slice's first (top), a partial column its last
+        block = block[block.shape[0] % 2:, :block.shape[1] // 4 * 4]
+        g = block.reshape(block.shape[0] // 2, 2, block.shape[1] // 4, 4).max(axis=(1, 3))
+        busiest += 8 * int(g.sum())
+        traced += int(block.sum())
+    return busiest / traced - 1 if traced else 0.0
 
 
 def main(name="default", size="1280x720"):
@@ -57,7 +83,7 @@ def main(name="default", size="1280x720"):
             label = ", ".join(names[k] for k in subset) or "none"
             print(f"  objects {label}: {area / (W * H):.1%} of the pixels, {n / 1e6:.2f} M rays "
                   f"({n / max(area, 1):.1f} a pixel), {t * 1e3:.1f} ms, "
-                  f"{t / max(n, 1) * 1e9:.0f} ns a ray")
+                  f"{t / max(n, 1) * 1e9:.0f} ns a ray, SIMD waste {simd_waste(rays, rects, H):+.0%}")
     r.release()
     # the groups' rectangles tile the image exactly once
     assert not groups or sum(n for _, n in groups) == total, "groups do not cover the rays"
