@@ -8,6 +8,7 @@ import json
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -242,6 +243,34 @@ def test_cache_key_follows_what_the_error_depends_on(gl, cache_root):
     key.machine = dict(key.machine, cpu="another CPU")
     stems.add(key.stem())
     assert stem not in stems and len(stems) == 4
+
+
+def test_cache_key_follows_the_code_that_decides_pixels(gl, cache_root, tmp_path, monkeypatch):
+    import shutil
+
+    import viewer
+
+    package = Path(viewer.__file__).resolve().parent
+    copy = tmp_path / "viewer"
+    shutil.copytree(package, copy, ignore=shutil.ignore_patterns("__pycache__"))
+    assert q._code_digest(copy) == q._code_digest()
+    # a window-only module is not part of it ...
+    (copy / "app.py").write_text((copy / "app.py").read_text() + "\n# an edit\n")
+    assert q._code_digest(copy) == q._code_digest()
+    # ... every module that decides pixels or times is
+    digests = set()
+    for name in q.CODE_MODULES:
+        original = (copy / f"{name}.py").read_text()
+        (copy / f"{name}.py").write_text(original + "\n# an edit\n")
+        digests.add(q._code_digest(copy))
+        (copy / f"{name}.py").write_text(original)
+    assert q._code_digest() not in digests and len(digests) == len(q.CODE_MODULES)
+    # and the key's stem follows the digest
+    scene = make_scene_from_toml()
+    lay = q.layout(64, 36)
+    stem = q.make_key(gl, scene, lay).stem()
+    monkeypatch.setattr(q, "_code_digest", lambda package=None: "another")
+    assert q.make_key(gl, scene, lay).stem() != stem
 
 
 # ---------------------------------------------------------------- the command

@@ -70,8 +70,9 @@ The measurements are cached as JSON (the reference as .npy beside it) in
 ``$XDG_CACHE_HOME/glassray/quality`` (default ``~/.cache/glassray/quality``),
 one file per key: the scene's content less the three settings being chosen
 (camera and lights included: what is seen decides the error), the machine
-(GL renderer, CPU model, usable CPUs), the image size, the shader sources
-and the measuring method.  Files are written atomically; an unreadable or
+(GL renderer, CPU model, usable CPUs), the image size, the shader sources,
+the Python modules that decide pixels and times (:data:`CODE_MODULES`) and
+the measuring method.  Files are written atomically; an unreadable or
 corrupt one is measured again, with one warning.
 
 Explicit settings fix their value: ``--samples 4 --max-error E`` chooses among
@@ -278,6 +279,15 @@ def scene_key(scene) -> str:
     return _scene_digest(error_scene(scene))
 
 
+#: The modules of this package whose code decides a candidate's pixels or
+#: its time (how the scene becomes uniforms and defines, the culling, the
+#: sample pattern and footprints, the draws, this measuring method): a new
+#: version of any of them measures again, like a change of the shaders.
+#: (Not the whole package: an edit of the viewer's window code changes no
+#: measurement.)
+CODE_MODULES = ("gpu_scene", "renderer", "culling", "sampling", "shaders", "adaptive", "quality")
+
+
 def _shader_digest() -> str:
     from .shaders import shader_root
 
@@ -287,6 +297,17 @@ def _shader_digest() -> str:
         if p.is_file() and p.suffix in (".frag", ".glsl", ".vert"):
             h.update(str(p.relative_to(root)).encode())
             h.update(p.read_bytes())
+    return h.hexdigest()[:12]
+
+
+def _code_digest(package: Path | None = None) -> str:
+    """The digest of :data:`CODE_MODULES`' sources in ``package`` (default:
+    this package's folder)."""
+    h = hashlib.sha256()
+    here = Path(__file__).resolve().parent if package is None else Path(package)
+    for name in CODE_MODULES:
+        h.update(name.encode())
+        h.update((here / f"{name}.py").read_bytes())
     return h.hexdigest()[:12]
 
 
@@ -304,7 +325,8 @@ def method() -> dict:
 
     return {"version": METHOD_VERSION, "reference_samples": REFERENCE_SAMPLES, "reference_seed": REFERENCE_SEED,
             "reference_max_depth": REFERENCE_MAX_DEPTH, "reference_min_weight": REFERENCE_MIN_WEIGHT,
-            "render_seed": RENDER_SEED, "min_timed_passes": MIN_TIMED_PASSES, "shaders": _shader_digest()}
+            "render_seed": RENDER_SEED, "min_timed_passes": MIN_TIMED_PASSES, "shaders": _shader_digest(),
+            "code": _code_digest()}
 
 
 def cache_dir() -> Path:
