@@ -169,3 +169,19 @@ def test_a_sky_larger_than_the_drivers_largest_texture_is_a_clear_failure(gl, tm
     assert len(err) == 1 and err[0].startswith("glassray: sky.image: ") and "scale the picture down" in err[0], err
     assert not out.exists()
     gl.__enter__()                                  # cli.main made (and released) its own context
+
+
+def test_pfm_with_windows_line_ends_reads_the_same_floats(tmp_path):
+    from viewer.imageio import read_pfm
+
+    # bytes chosen so that an off-by-one read would give other numbers
+    values = np.array([[[0.25, 0.5, 2.0], [1.0, 3.0, 0.125]]], "<f4")
+    for name, header in (("lf.pfm", b"PF\n2 1\n-1.0\n"), ("crlf.pfm", b"PF\r\n2 1\r\n-1.0\r\n")):
+        (tmp_path / name).write_bytes(header + values.tobytes())
+        assert np.array_equal(read_pfm(tmp_path / name), values), name
+    # LF-ended data whose first byte is 0x0A after a CR as the header's last
+    # byte: the length decides, so the data stay as written
+    first = np.frombuffer(b"\n\x00\x80\x3f", "<f4")[0]           # 0x3f80000a: just above 1.0
+    odd = np.array([[[first, 0.5, 2.0]]], "<f4")
+    (tmp_path / "cr.pfm").write_bytes(b"PF\n1 1\n-1.0\r" + odd.tobytes())
+    assert np.array_equal(read_pfm(tmp_path / "cr.pfm"), odd)

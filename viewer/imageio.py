@@ -102,6 +102,12 @@ def read_pfm(path: str | Path) -> np.ndarray:
         raise ImageReadError(f"not a PFM file (size {w}x{h}, scale {scale:g})")
     ch = 3 if tokens[0] == b"PF" else 1
     need = w * h * ch * 4
+    if data[pos - 1:pos + 1] == b"\r\n" and len(data) - pos == need + 1:
+        # A header written with Windows line ends: the byte after the scale
+        # is CR and the data begin after its LF (read from the LF, every
+        # float would be one byte off).  Only where the file's length says
+        # so, so that LF-ended data whose first byte is 0x0A stay as they are.
+        pos += 1
     if len(data) - pos < need:
         raise ImageReadError(f"truncated PFM: {w}x{h} needs {need} bytes of data, the file has {max(len(data) - pos, 0)}")
     img = np.frombuffer(data, dtype="<f4" if scale < 0 else ">f4", count=w * h * ch, offset=pos)
