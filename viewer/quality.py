@@ -55,14 +55,14 @@ pixels:
   the mosaic's own sampling error), so a budget below it cannot be resolved.
 * **time**: the whole picture, at its own size up to
   :data:`FULL_TIMING_PIXELS` (a warm-up pass then :data:`FULL_TIMED_PASSES`
-  timed passes of one sample), larger ones scaled down to the same number
-  of pixels as measured (its cost per pixel is the full image's: the mean
-  rays per pixel agree; :data:`MIN_TIMED_PASSES` passes), each finished on
-  the GPU; a candidate's time is (the median pass x its samples + one
-  read-back of the picture) x (full pixels / timed pixels): an estimate of
-  one W x H frame as ``glassray render --timing`` measures it.  (Scaled
-  down below that size, a pass's fixed cost was scaled up with the pixels:
-  the default scene at 640x360 was estimated 20-40% slow.)  A candidate
+  timed passes of one sample), larger ones scaled down to about that many
+  pixels (its cost per pixel is the full image's: the mean rays per pixel
+  agree), each finished on the GPU; a candidate's time is (the median pass
+  x its samples + one read-back of the picture) x (full pixels / timed
+  pixels): an estimate of one W x H frame as ``glassray render --timing``
+  measures it.  (Scaled down further, a pass's fixed cost was scaled up
+  with the pixels: the default scene at 640x360 timed at 160x90 was
+  estimated 20-40% slow, at 1920x1080 1.6-2.6x.)  A candidate
   that takes footprint samples is timed with them, and with its picture's
   mask made once (:meth:`Measurement._timed_footprint`).
 
@@ -112,15 +112,12 @@ REFERENCE_SAMPLES = 64
 #: Pixels a band of a whole-image pass of the truncation control variate
 #: traces at most (Measurement._centre_full).
 FULL_BAND_PIXELS = 1280 * 48
-#: Images of at most this many pixels are timed at their own size (and
-#: FULL_TIMED_PASSES passes), larger ones scaled down to about
-#: MEASURE_PIXELS (MIN_TIMED_PASSES passes).
+#: Images of at most this many pixels are timed at their own size, larger
+#: ones scaled down to about this many; FULL_TIMED_PASSES timed passes.
 FULL_TIMING_PIXELS = 1280 * 720
 FULL_TIMED_PASSES = 3
-#: Timed passes per (max depth, min weight) at least.
-MIN_TIMED_PASSES = 5
 #: Bumped when the measuring method changes (old cache files are then ignored).
-METHOD_VERSION = 4
+METHOD_VERSION = 5
 #: Seed of the candidates' sample pattern (glassray render's default).
 RENDER_SEED = 0
 
@@ -219,7 +216,7 @@ class Layout:
     """Which pixels are measured.  Error: ``tiles`` (x, y, w, h) of the full
     image (x right, y down from the top row), packed in a mosaic of ``size``
     (tile k at ``packed[k]``, x, y from the top).  Time: the whole picture
-    scaled down to ``timing_size``."""
+    at ``timing_size`` (the full size, or about FULL_TIMING_PIXELS)."""
     full: tuple[int, int]
     size: tuple[int, int]
     tiles: tuple[tuple[int, int, int, int], ...]
@@ -242,11 +239,13 @@ def layout(width: int, height: int, pixels: int = MEASURE_PIXELS, grid: int = GR
     if width * height <= pixels * 1.25:
         return Layout((width, height), (width, height), ((0, 0, width, height),), ((0, 0),), (width, height))
     f = math.sqrt(pixels / (width * height))
-    # timed at the real size up to FULL_TIMING_PIXELS: scaled down, a pass's
-    # fixed cost (draw calls, the GPU's finish) was scaled up with the
-    # pixels, and the default scene's estimates at 640x360 ran 20-40% high
+    # timed at the real size up to FULL_TIMING_PIXELS, else at about that
+    # many pixels: scaled down to the mosaic's size, a pass's fixed cost
+    # (draw calls, the GPU's finish) was scaled up with the pixels, and the
+    # default scene's estimates ran 20-40% high at 640x360, 1.6-2.6x at 1920x1080
+    ft = math.sqrt(FULL_TIMING_PIXELS / (width * height))
     timing = ((width, height) if width * height <= FULL_TIMING_PIXELS
-              else (max(1, round(width * f)), max(1, round(height * f))))
+              else (max(1, round(width * ft)), max(1, round(height * ft))))
     tw = max(1, min(width // grid, round(width * f / grid)))
     th = max(1, min(height // grid, round(height * f / grid)))
     rng = np.random.default_rng(width * 100003 + height)
@@ -325,7 +324,7 @@ def method() -> dict:
 
     return {"version": METHOD_VERSION, "reference_samples": REFERENCE_SAMPLES, "reference_seed": REFERENCE_SEED,
             "reference_max_depth": REFERENCE_MAX_DEPTH, "reference_min_weight": REFERENCE_MIN_WEIGHT,
-            "render_seed": RENDER_SEED, "min_timed_passes": MIN_TIMED_PASSES, "shaders": _shader_digest(),
+            "render_seed": RENDER_SEED, "timed_passes": FULL_TIMED_PASSES, "shaders": _shader_digest(),
             "code": _code_digest()}
 
 
@@ -593,7 +592,7 @@ class Measurement:
             by_trace.setdefault((c.max_depth, c.min_weight), []).append(c.samples)
         self._by_trace = by_trace
         self.total = ((REFERENCE_SAMPLES + 1 if reference is None else 0)
-                      + sum(2 + 2 * (FULL_TIMED_PASSES if lay.timing_size == lay.full else MIN_TIMED_PASSES)
+                      + sum(2 + 2 * FULL_TIMED_PASSES
                             + sum(ss) + 2 for ss in by_trace.values())
                       + (len(lay.tiles) if reference is None or any(c.samples > 1 for c in self.todo) else 0)
                       # the control variate's centred passes: the mosaic (1), the image's bands and its read
@@ -795,7 +794,7 @@ class Measurement:
             self.noise = float(np.sqrt(np.mean((a[keep] - b[keep]) ** 2)) / 2) if keep.any() else float("nan")
             self.rendered_reference = True
         # time of a whole frame: the timing picture's (the image itself up to
-        # FULL_TIMING_PIXELS, else scaled down) scaled to all pixels
+        # FULL_TIMING_PIXELS, else about that many pixels) scaled to all pixels
         scale = self.layout.full[0] * self.layout.full[1] / (self.layout.timing_size[0] * self.layout.timing_size[1])
         tw, th = self.layout.timing_size
         self._timing_fbo = self.ctx.simple_framebuffer((tw, th), components=4, dtype="f4")
@@ -815,7 +814,7 @@ class Measurement:
                 t_full = _squared_difference(((yield from self._centre_full())), ref_full)
                 t_full_mean = float(np.mean(t_full[np.isfinite(t_full)])) if np.isfinite(t_full).any() else 0.0
             timings: list[float] = []
-            passes = FULL_TIMED_PASSES if self.layout.timing_size == self.layout.full else MIN_TIMED_PASSES
+            passes = FULL_TIMED_PASSES
             yield from self._timed_passes(1 + passes, timings)
             per_pass = statistics.median(timings[1:])  # the first is a warm-up
             # and what a render does once whatever its samples: read the image back
