@@ -449,19 +449,20 @@ def test_check_stays_one_line_for_a_name_with_a_newline(tmp_path):
     assert r.stdout == "two\\nlines: 0 objects, 0 materials, 0 lights; features: sky:gradient\n"
 
 
-def test_an_abbreviated_vector_option_takes_a_leading_minus_like_the_full_name():
+def test_a_vector_option_takes_a_leading_minus_and_abbreviations_are_refused():
     from viewer.cli import build_parser, normalise_argv
 
     parser = build_parser()
     full = parser.parse_args(normalise_argv(["render", "-o", "x.png", "--camera-position", "-1,2,3"]))
-    short = parser.parse_args(normalise_argv(["render", "-o", "x.png", "--camera-pos", "-1,2,3"]))
-    assert short.camera_position == full.camera_position == (-1.0, 2.0, 3.0)
-    # argparse still resolves the abbreviation, so an ambiguous one is still bad usage (exit 2)
-    with pytest.raises(SystemExit) as e:
-        parser.parse_args(normalise_argv(["render", "-o", "x.png", "--camera", "-1,2,3"]))
-    assert e.value.code == 2
+    joined = parser.parse_args(normalise_argv(["render", "-o", "x.png", "--camera-position=-1,2,3"]))
+    assert joined.camera_position == full.camera_position == (-1.0, 2.0, 3.0)
+    # options are whole names only (tests/test_cli_edges.py): an abbreviation is bad usage (exit 2)
+    for short in ("--camera-pos", "--camera"):
+        with pytest.raises(SystemExit) as e:
+            parser.parse_args(normalise_argv(["render", "-o", "x.png", short, "-1,2,3"]))
+        assert e.value.code == 2
     # a value that is an option is not swallowed
-    assert normalise_argv(["render", "--camera-pos", "--debug"])[-2:] == ["--camera-pos", "--debug"]
+    assert normalise_argv(["render", "--camera-position", "--debug"])[-2:] == ["--camera-position", "--debug"]
 
 
 def test_a_reader_that_goes_away_ends_it_quietly():

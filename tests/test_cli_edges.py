@@ -303,3 +303,25 @@ def test_the_viewer_warns_once_where_trees_may_be_cut(xdisplay, tmp_path):
     assert "the viewer traces each tree in one draw" in r.stderr
     quiet = viewer_run(xdisplay, tmp_path, "view", "--size", "64x36", "--no-vsync", "--soak", "2")
     assert quiet.returncode == 0 and "warning" not in quiet.stderr, quiet.stderr
+
+
+@pytest.mark.parametrize("argv, abbreviated", [
+    (["render", "-o", "x.png", "--sample", "2"], "--sample"),
+    (["render", "-o", "x.png", "--cam", "0,1,2"], "--cam"),
+    (["view", "--no-vs"], "--no-vs"),
+    (["bench", "--quic"], "--quic"),
+    (["stress", "--lis"], "--lis"),
+    (["check", "--deb"], "--deb"),
+])
+def test_options_are_taken_by_their_whole_names_only(argv, abbreviated, capsys):
+    # argparse takes any unambiguous prefix by default: an interface the spec
+    # does not define, and one that a new option would break
+    from viewer.cli import build_parser
+
+    with pytest.raises(SystemExit) as e:
+        build_parser().parse_args(argv)
+    assert e.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"unrecognized arguments: {abbreviated}" in err[0], err
+    whole = build_parser().parse_args(["render", "-o", "x.png", "--samples", "2", "--camera-position=-1,2,3"])
+    assert whole.samples == 2 and whole.camera_position == (-1.0, 2.0, 3.0)

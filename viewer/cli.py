@@ -116,7 +116,14 @@ def _add_overrides(p: argparse.ArgumentParser) -> None:
 class _Parser(argparse.ArgumentParser):
     """argparse, with a usage error as one line on stderr (cli.md: "one
     clear message") instead of the usage block before it, which for render
-    is nine lines that hide the error; the line says where the usage is."""
+    is nine lines that hide the error; the line says where the usage is.
+    Options are taken by their whole names only: argparse's prefixes
+    (`--sample 4` for `--samples 4`) would be an interface that the spec
+    does not define and that a new option could make ambiguous."""
+
+    def __init__(self, *args, **kwargs):
+        kwargs.setdefault("allow_abbrev", False)      # subcommands' parsers are made by this class too
+        super().__init__(*args, **kwargs)
 
     def error(self, message: str):
         self.exit(2, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
@@ -214,14 +221,13 @@ def _optional_module(name: str):
 
 def normalise_argv(argv: list[str]) -> list[str]:
     """Default subcommand and vector (and size) values with a leading minus:
-    ``--camera-position -1,2,3`` becomes ``--camera-position=-1,2,3``.  An
-    abbreviation argparse would take (``--camera-pos -1,2,3``) is joined the
-    same way and left for argparse to resolve, or to call ambiguous."""
+    ``--camera-position -1,2,3`` becomes ``--camera-position=-1,2,3``
+    (options are whole names only: see _Parser)."""
     out: list[str] = []
     i = 0
     while i < len(argv):
         a = argv[i]
-        takes_dash = a.startswith("--") and len(a) > 2 and any(o.startswith(a) for o in DASH_VALUE_OPTIONS)
+        takes_dash = a in DASH_VALUE_OPTIONS
         if takes_dash and i + 1 < len(argv) and argv[i + 1].startswith("-") and argv[i + 1][1:2] not in ("-", ""):
             out.append(f"{a}={argv[i + 1]}")
             i += 2
