@@ -30,7 +30,7 @@ MATERIAL_DTYPE = np.dtype([("colorAmbient", "<f4", 4), ("phong", "<f4", 4), ("di
                            ("absorption", "<f4", 4), ("emission", "<f4", 4), ("checkerColor", "<f4", 4),
                            ("checkerEmission", "<f4", 4), ("checkerOffset", "<f4", 4)])
 LIGHT_DTYPE = np.dtype([("vector", "<f4", 4), ("radiance", "<f4", 4)])
-MEDIUM_DTYPE = np.dtype([("index", "<i4", 4)])
+MEDIUM_DTYPE = np.dtype([("index", "<i4", 4), ("optics", "<f4", 4), ("absorption", "<f4", 4)])
 TAIL_DTYPE = np.dtype([("ambient", "<f4", 4), ("skyColor", "<f4", 4), ("skyHorizon", "<f4", 4),
                        ("skyZenith", "<f4", 4), ("params", "<f4", 4), ("iparams", "<i4", 4),
                        ("counts", "<i4", 4)])
@@ -488,7 +488,10 @@ def _pack_scene(scene: Scene, specialise: bool, fresnel: str) -> PackedScene:
             rec["a"] = (*(np.array(o.base) - eye), o.radius)
             rec["b"][:2] = (o.height, o.wall or 0.0)
         if tr:
+            m = scene.materials[o.material]
             media[slot]["index"] = (k, mat_index[o.material], 0, 0)
+            media[slot]["optics"] = (m.ior, m.transparency, 0.0, 0.0)      # as the material's, below
+            media[slot]["absorption"][:3] = m.absorption
             if contains_point(o, eye):
                 initial_mask |= 1 << slot
             slot += 1

@@ -48,6 +48,15 @@ struct Material {
     vec4 checkerOffset;      // xy: eye's world (x, z) modulo 2 * size, for the parity
 };
 
+// A transparent slot: its object and material, and the material's optics
+// again, so that a medium's ior, transparency and absorption are read at
+// the slot's own index (trace.frag's mediumOptics).
+struct Medium {
+    ivec4 index;        // x: object index, y: material index
+    vec4 optics;        // x: ior, y: transparency
+    vec4 absorption;    // rgb
+};
+
 struct Light {
     vec4 vector;    // xyz: camera-relative position (point) or unit direction of travel; w: 0 point, 1 directional
     vec4 radiance;  // rgb: color * intensity
@@ -57,7 +66,7 @@ layout(std140) uniform SceneBlock {
     Object objects[OBJECTS_LEN];
     Material materials[MATERIALS_LEN];
     Light lights[LIGHTS_LEN];
-    ivec4 media[MEDIA_LEN];   // per transparent slot: x object index, y material index
+    Medium media[MEDIA_LEN];  // per transparent slot
     vec4 ambient;             // rgb
     vec4 skyColor;
     vec4 skyHorizon;
