@@ -284,3 +284,33 @@ def test_a_renderer_builds_its_later_variants_from_the_shaders_it_started_with(g
             Renderer(gl, load_scene("default"))      # F5: the disk as it is now
     finally:
         r.release()
+
+
+def test_a_medium_s_optics_edited_in_place_take_effect_without_a_compile(gl):
+    # The block carries each transparent slot's ior, transparency and
+    # absorption beside its material (gpu_scene.MEDIUM_DTYPE): an edit of
+    # those values (the panel's set_scene) must reach every copy, with no
+    # new program, and give the image a new renderer of the edited scene gives.
+    import copy
+
+    from viewer.renderer import Renderer
+
+    scene = load_scene("coloured-liquid")
+    r = Renderer(gl, scene)
+    before = r.render(64, 36, 1)
+    built = r.programs_built
+    edited = copy.deepcopy(scene)
+    transparent = [m for m in edited.materials.values() if m.transparency > 0]
+    assert len(transparent) >= 2
+    for m in transparent:
+        m.ior = 1.9 if m.ior < 1.4 else 1.2
+        m.absorption = [0.5, 0.1, 0.9]
+        m.transparency = 0.7
+    r.set_scene(edited)
+    after = r.render(64, 36, 1)
+    assert r.programs_built == built
+    assert np.abs(after - before).max() > 0.05
+    fresh = Renderer(gl, edited)
+    assert np.array_equal(after, fresh.render(64, 36, 1))
+    r.release()
+    fresh.release()
