@@ -162,3 +162,32 @@ def test_a_candidate_s_time_is_that_of_the_render_it_stands_for(gl, monkeypatch)
     meas.run()
     got = {c.samples: meas.measured[c.key()].time_ms for c in cands}
     assert got == {1: 10.0 + 2.0, 2: 30.0 + 2 * 12.0 + 2.0, 8: 30.0 + 8 * 12.0 + 2.0}
+
+
+def test_timed_passes_compile_nothing(gl, monkeypatch):  # noqa: F811
+    """A draw compiles one culling variant at most (Renderer's
+    COMPILES_PER_DRAW), so timed passes that began compiling took compiles
+    for frame time: at 1920x1080 the first trace's one-sample candidate was
+    estimated at 1.69 s for a 0.26 s frame.  Every timed draw (the picture
+    at its timing size: ``full`` unset) must find its programs built."""
+    from viewer.renderer import Renderer
+    from viewer.scene import load_scene
+
+    timed = []
+    draw_sample = Renderer.draw_sample
+
+    def counting(self, width, height, offset, viewport=None, compile=True):
+        before = self.programs_built
+        draw_sample(self, width, height, offset, viewport, compile)
+        if getattr(self, "full", "absent") is None:
+            # (programs built by the draw, variants of the plan it drew with)
+            timed.append((self.programs_built - before, len(self._plan_groups) if self.culls() else 1))
+
+    monkeypatch.setattr(Renderer, "draw_sample", counting)
+    scene = load_scene("default")
+    lay = q.layout(160, 90)
+    cands = [q.Candidate(1, 2, 0.01), q.Candidate(1, 10, 0.0001)]    # two stack sizes: two sets of variants
+    q.Measurement(gl, scene, lay, cands).run()
+    assert len(timed) == 2 * (1 + q.FULL_TIMED_PASSES), timed
+    assert min(groups for _, groups in timed) > 1                   # culled: several variants to build
+    assert [built for built, _ in timed] == [0] * len(timed)
