@@ -15,11 +15,11 @@ without tracing fewer rays, that is without changing the image.
 Each group's line also gives its SIMD waste: llvmpipe shades a 4x2 block
 of pixels as one group of 8 lanes (`tools/llvmpipe_branches.py`), whose
 loops run until its slowest lane is done, so the block costs about 8 times
-its pixel with the most rays; the waste is the sum of that over the
-group's blocks against the rays it traces (a pixel's rays stand for
-its lane's work).  A small waste means that the
-time goes into the code each ray runs, not into lanes left idle, and no
-regrouping of pixels (sorting rays, compaction) has much to win.
+its pixel with the most rays (a pixel's rays stand for its lane's work);
+the waste is the sum of that over the group's blocks against the rays it
+traces.  A small waste means that the time goes into the code each ray
+runs, not into lanes left idle, and that no regrouping of pixels (sorting
+rays, compaction) has much to win.
 
 Usage (repository root, the project's virtual environment)::
 

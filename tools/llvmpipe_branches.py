@@ -74,7 +74,8 @@ def main(size: int = 1024) -> None:
             mask = ctx.program(vertex_shader=VERTEX, fragment_shader=MASK.format(fails=fails % {"half": size // 2}))
             ctx.enable(moderngl.DEPTH_TEST)
             ctx.depth_func = "1"                       # GL_ALWAYS: the mask's depths go in as written
-            ctx.vertex_array(mask, [(vbo, "2f", "p")]).render()
+            mask_vao = ctx.vertex_array(mask, [(vbo, "2f", "p")])
+            mask_vao.render()
             ctx.depth_func = "<"
             fbo.depth_mask = False                     # the timed draws leave the mask as it is
         vao.render()
@@ -85,10 +86,11 @@ def main(size: int = 1024) -> None:
             vao.render()
             ctx.finish()
             times.append(time.perf_counter() - t)
-        print(f"  {name:34s} {statistics.median(times) * 1e3:7.1f} ms")
+        print(f"  {name:40s} {statistics.median(times) * 1e3:7.1f} ms")
         if fails is not None:
             ctx.disable(moderngl.DEPTH_TEST)
             fbo.depth_mask = True
+            mask_vao.release()
             mask.release()
         vao.release()
         prog.release()
