@@ -11,6 +11,14 @@ APT_PACKAGES := libegl1 libegl-mesa0 libgl1-mesa-dri libosmesa6 xvfb xdotool
 # glslangValidator (glslang-tools) lets tests/test_glsl_portability.py check
 # every shader program against the GLSL spec (skipped without it).
 OPTIONAL_APT := libllvm19 glslang-tools
+# Debian 12's Mesa (22.3) runs both sides of every branch on llvmpipe; Mesa 25
+# from bookworm-backports skips a branch that no pixel of a SIMD group takes,
+# and draws the default frame 2-3x faster (docs/performance.md).  As root on
+# Debian 12, system-deps takes these from bookworm-backports (adding that suite
+# to apt's sources if it is not there); GLASSRAY_DISTRO_MESA=1 keeps Debian's.
+# Without root it only says how.  glassray works with either.
+MESA_BACKPORT := libegl-mesa0 libgl1-mesa-dri libosmesa6 libglx-mesa0 libgbm1
+BACKPORTS_LIST := /etc/apt/sources.list.d/glassray-bookworm-backports.sources
 
 .PHONY: run test system-deps venv clean
 
@@ -35,7 +43,21 @@ system-deps:
 	    { DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $$p >/dev/null 2>&1 \
 	      || { apt-get update -qq >/dev/null 2>&1 && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $$p >/dev/null 2>&1; }; } \
 	      || echo "note: optional package $$p not installed (see OPTIONAL_APT in the Makefile)"; fi; \
-	done
+	done; \
+	mesa=$$(dpkg-query -W -f='$${Version}' libegl-mesa0 2>/dev/null); \
+	if [ -z "$$GLASSRAY_DISTRO_MESA" ] && [ -n "$$mesa" ] && grep -qs '^VERSION_CODENAME=bookworm' /etc/os-release \
+	   && dpkg --compare-versions "$$mesa" lt 25; then \
+	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
+	    echo "Mesa $$mesa runs every branch on llvmpipe: installing Mesa from bookworm-backports (GLASSRAY_DISTRO_MESA=1 keeps it)"; \
+	    grep -rqs 'bookworm-backports' /etc/apt/sources.list /etc/apt/sources.list.d \
+	      || printf 'Types: deb\nURIs: %s\nSuites: bookworm-backports\nComponents: main\nSigned-By: /usr/share/keyrings/debian-archive-keyring.gpg\n' \
+	           "$$(sed -n 's/^URIs: *\([^ ]*\/debian\)$$/\1/p' /etc/apt/sources.list.d/debian.sources 2>/dev/null | head -n1 | grep . || echo http://deb.debian.org/debian)" \
+	           > $(BACKPORTS_LIST); \
+	    { apt-get update -qq >/dev/null 2>&1 \
+	      && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq -t bookworm-backports $(MESA_BACKPORT) >/dev/null 2>&1; } \
+	      || echo "note: Mesa from bookworm-backports not installed; keeping Mesa $$mesa"; \
+	  else echo "note: Mesa $$mesa runs every branch on llvmpipe; Mesa 25 from bookworm-backports draws 2-3x faster (see the README)"; fi; \
+	fi
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
