@@ -191,3 +191,18 @@ def test_timed_passes_compile_nothing(gl, monkeypatch):  # noqa: F811
     assert len(timed) == 2 * (1 + q.FULL_TIMED_PASSES), timed
     assert min(groups for _, groups in timed) > 1                   # culled: several variants to build
     assert [built for built, _ in timed] == [0] * len(timed)
+
+
+def test_a_new_driver_release_is_a_new_machine():
+    """Mesa 22.3 and 25.0 name llvmpipe alike ("llvmpipe (LLVM 15.0.6, 256
+    bits)") but draw at very different speeds: timings measured with one
+    must not pick settings for the other."""
+    class FakeCtx:
+        def __init__(self, version):
+            self.info = {"GL_RENDERER": "llvmpipe (LLVM 15.0.6, 256 bits)",
+                         "GL_VERSION": f"4.5 (Core Profile) Mesa {version}"}
+
+    old, new = q.machine(FakeCtx("22.3.6")), q.machine(FakeCtx("25.0.7"))
+    assert old["gl_renderer"] == new["gl_renderer"]
+    assert old != new
+    assert q.machine(FakeCtx("25.0.7")) == new

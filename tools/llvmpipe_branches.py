@@ -1,16 +1,19 @@
 """What a branch skips on this OpenGL driver: the time of one full-screen
 draw whose fragments run a costly block of code always, never (behind an
 `if` that no fragment takes, per fragment or on a uniform), in a loop of
-zero or one iterations, after a `discard`, or not at all because the
-early depth test fails for them (docs/performance.md, "What a branch
-costs").
+zero or one iterations (bare, behind an `if`, left by a `break` or after
+a `return`), after a `discard`, or not at all because the early depth test
+fails for them (docs/performance.md, "What a branch costs").
 
 On a GPU a block that no thread of a warp takes is skipped.  Mesa's
-llvmpipe runs a SIMD group's lanes under a mask: a block behind an `if`
-costs what it costs when taken, a loop runs its body at least once even
-when no lane enters it, and a `discard` only masks the lanes off.  Only
-whole draws (the tile culling), the iterations after a loop's first, and
-a SIMD group whose every fragment fails the early depth test skip work.
+llvmpipe runs a SIMD group (a 4x2 block of pixels) under a mask.  Mesa
+22.3 (Debian 12's) runs a block behind an `if` that no lane takes, and a
+loop's body at least once even when no lane enters it; only whole draws,
+the iterations after a loop's first, and a group whose every fragment
+fails the early depth test skip work.  Mesa 25.0 (bookworm-backports)
+skips an `if`, a `break` or a `return` that leaves every lane out, but
+still runs a bare loop's first iteration; a `discard` only masks the
+lanes off on both.
 
 Usage (repository root, the project's virtual environment)::
 
@@ -40,6 +43,11 @@ CASES = {
     "loop of 0 iterations": ("for (int i = 0; i < int(gl_FragCoord.x) - 100000; ++i) { %s }" % HEAVY, None),
     "loop of 1 iteration": ("for (int i = 0; i < int(gl_FragCoord.x) - int(gl_FragCoord.x) + 1; ++i) { %s }" % HEAVY,
                             None),
+    "loop of 0 iterations, behind an if": ("int n = int(gl_FragCoord.x) - 100000; if (n > 0) { for (int i = 0; "
+                                           "i < n; ++i) { %s } }" % HEAVY, None),
+    "loop whose first iteration breaks": ("for (int i = 0; i < 4; ++i) { if (gl_FragCoord.x > -5.0) break; %s }"
+                                          % HEAVY, None),
+    "loop after a return in a function": ("x = early(x);", None),
     "discard, every fragment": ("if (gl_FragCoord.x > -5.0) discard; " + HEAVY, None),
     "depth test fails, every fragment": (HEAVY, "true"),
     "depth test fails, left half": (HEAVY, "gl_FragCoord.x < %(half)d.0"),
@@ -56,12 +64,14 @@ def fragment(body: str) -> str:
     sines = " ".join("x = sin(x * 1.0001 + k);" for _ in range(8))
     return ("#version 330\nuniform float k;\nout vec4 color;\n"
             f"float heavy(float x) {{ {sines} return x; }}\n"
+            "float early(float x) { if (gl_FragCoord.x > -5.0) return x; "
+            f"for (int i = 0; i < int(k) + 1; ++i) {{ {HEAVY} }} return x; }}\n"
             f"void main() {{ float x = gl_FragCoord.x * 0.001; {body} color = vec4(x); }}\n")
 
 
 def main(size: int = 1024) -> None:
     ctx = moderngl.create_standalone_context(backend="egl")
-    print(f"{ctx.info['GL_RENDERER']}, {size}x{size}, median of 9 draws (each finished)")
+    print(f"{ctx.info['GL_RENDERER']}, {ctx.info['GL_VERSION']}, {size}x{size}, median of 9 draws (each finished)")
     vbo = ctx.buffer(np.array([-1, -1, 3, -1, -1, 3], "f4"))
     fbo = ctx.framebuffer([ctx.texture((size, size), 4, dtype="f4")], ctx.depth_texture((size, size)))
     fbo.use()
