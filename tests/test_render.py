@@ -314,3 +314,25 @@ def test_a_medium_s_optics_edited_in_place_take_effect_without_a_compile(gl):
     assert np.array_equal(after, fresh.render(64, 36, 1))
     r.release()
     fresh.release()
+
+
+def test_each_render_returns_its_own_image(gl):
+    """render() reads back into a buffer it keeps: the image it returns must
+    not be that buffer, or the next render of the same size would change
+    an image the caller holds (and one of another size would leave it)."""
+    from viewer.renderer import Renderer
+
+    r = Renderer(gl, load_scene("default"), eager=False)
+    lit = r.render(48, 27, 1)
+    kept = lit.copy()
+    r.scene.lights[0].color = (0.0, 0.0, 0.0)
+    r.set_scene(r.scene)
+    dark = r.render(48, 27, 1)
+    assert not np.array_equal(dark, kept), "the light's change shows"
+    assert np.array_equal(lit, kept), "the first image did not change"
+    assert lit.flags.c_contiguous and lit.flags.writeable and lit.flags.owndata
+    dark_kept = dark.copy()
+    r.render(48, 27, 2)                                  # the divided read-back
+    r.render(24, 12, 1)                                  # another size: a new buffer
+    assert np.array_equal(dark, dark_kept)
+    r.release()

@@ -108,6 +108,7 @@ class Renderer:
         self._camera_key = None
         self._camera: dict = {}
         self._fbo_tex: moderngl.Texture | None = None
+        self._readback: bytearray | None = None     # _read_rgb's buffer, the target's size
         self._footprints = None           # footprint_sampler's AdaptiveSampler
         #: shader programs this renderer has built (a benchmark checks that
         #: its timed renders build none)
@@ -388,15 +389,22 @@ class Renderer:
             if obj is not None:
                 obj.release()
         self._fbo = self._fbo_tex = None
+        self._readback = None
 
     def _read_rgb(self, fbo: moderngl.Framebuffer, samples: int = 1) -> np.ndarray:
         """(H, W, 3) float32 of the framebuffer divided by `samples`, first
-        row = top.  Read as RGB: the driver drops alpha faster than numpy
-        copies a strided view."""
+        row = top, a new array.  Read as RGB: the driver drops alpha faster
+        than numpy copies a strided view.  Read into a buffer kept with the
+        target: a new 11 MB block for every 1280x720 read-back cost its page
+        faults, 2.4 ms of a 115 ms frame (Mesa 25, medians of 11)."""
         width, height = fbo.size
-        raw = np.frombuffer(fbo.read(components=3, dtype="f4"), np.float32).reshape(height, width, 3)
+        size = width * height * 12
+        if self._readback is None or len(self._readback) != size:
+            self._readback = bytearray(size)
+        fbo.read_into(self._readback, components=3, dtype="f4")
+        raw = np.frombuffer(self._readback, np.float32).reshape(height, width, 3)
         if samples == 1:
-            return np.ascontiguousarray(raw[::-1])
+            return raw[::-1].copy()
         return np.divide(raw[::-1], np.float32(samples))
 
     def takes_footprint(self, samples: int) -> bool:
