@@ -247,3 +247,23 @@ def test_osmesa_version_too_high_is_a_context_error():
         pytest.skip(_library_missing("osmesa"))
     with pytest.raises(ContextError, match="OSMesa backend"):
         create_offscreen_context("osmesa", require=990)
+
+
+def test_driver_release_names_the_driver_not_the_gl_version():
+    from viewer.context import driver_release
+
+    assert driver_release("4.5 (Core Profile) Mesa 25.0.7-2~bpo12+1") == "Mesa 25.0.7"
+    assert driver_release("4.5 (Core Profile) Mesa 22.3.6") == "Mesa 22.3.6"
+    assert driver_release("3.3.0 NVIDIA 580.159.04") == "NVIDIA 580.159.04"
+    assert driver_release("4.6") == ""
+    assert driver_release("") == ""
+
+
+def test_the_driver_release_of_this_context(context):
+    """Mesa's contexts (EGL and OSMesa here) name their release."""
+    from viewer.context import driver_release
+
+    _, ctx, _ = context
+    release = driver_release(ctx.info["GL_VERSION"])
+    assert release.startswith("Mesa ") and release.split()[1][0].isdigit()
+    assert release.split()[1] in ctx.info["GL_VERSION"]

@@ -25,6 +25,7 @@ from __future__ import annotations
 import ctypes
 import ctypes.util
 import os
+import re
 import threading
 import weakref
 
@@ -85,6 +86,20 @@ def describe(ctx: moderngl.Context) -> str:
     """``"GL_RENDERER / GL_VERSION"`` on one line, for logs and benchmarks."""
     info = ctx.info
     return f"{info['GL_RENDERER']} / {info['GL_VERSION']}"
+
+
+def driver_release(gl_version: str) -> str:
+    """The driver and its release from a GL_VERSION string, for a plot's
+    title: "4.5 (Core Profile) Mesa 25.0.7-2~bpo12+1" -> "Mesa 25.0.7",
+    "3.3.0 NVIDIA 580.159.04" -> "NVIDIA 580.159.04"; "" when the string
+    names none.  (llvmpipe's GL_RENDERER names only its LLVM, and two Mesa
+    releases differ 2-3x in speed on the same machine.)"""
+    m = re.match(r"\s*\d+(?:\.\d+)*\s*(?:\([^)]*\))?\s*(.*)$", gl_version)
+    rest = (m.group(1) if m else gl_version).strip()
+    words = rest.split()
+    if words and words[0] == "Mesa" and len(words) > 1:
+        words[1] = words[1].split("-")[0]
+    return " ".join(words)
 
 
 def release_context(ctx: moderngl.Context) -> None:
