@@ -259,6 +259,14 @@ def test_driver_release_names_the_driver_not_the_gl_version():
     assert driver_release("") == ""
 
 
+def test_renderer_and_release_from_a_description():
+    from viewer.context import renderer_and_release
+
+    assert (renderer_and_release("llvmpipe (LLVM 15.0.6, 256 bits) / 4.5 (Core Profile) Mesa 25.0.7-2~bpo12+1")
+            == "llvmpipe (LLVM 15.0.6, 256 bits) (Mesa 25.0.7)")
+    assert renderer_and_release("Some GPU / 4.6") == "Some GPU"
+
+
 def test_the_driver_release_of_this_context(context):
     """Mesa's contexts (EGL and OSMesa here) name their release."""
     from viewer.context import driver_release

@@ -1296,12 +1296,9 @@ def _run(args, ctx, backend, scenes, width, height, ref_samples, out: Path) -> i
     # the tables first: a run's results are not lost if its files cannot be written (a full disk)
     print(text, end="", flush=True)
     print()
-    from .context import driver_release
+    from .context import renderer_and_release
 
-    renderer, _, version = info["gl"].partition(" / ")
-    release = driver_release(version)
-    subtitle = (f"glassray bench, {width}x{height}, {renderer}{f' ({release})' if release else ''}, "
-                f"{info['cpus_usable']} CPUs; "
+    subtitle = (f"glassray bench, {width}x{height}, {renderer_and_release(info['gl'])}, {info['cpus_usable']} CPUs; "
                 f"reference {ref_samples}{f'/{refine}' if refine else ''} spp ({kind}); {info['date'][:10]}")
     stale = []
     with results_written_together():

@@ -102,6 +102,15 @@ def driver_release(gl_version: str) -> str:
     return " ".join(words)
 
 
+def renderer_and_release(description: str) -> str:
+    """describe()'s line as a plot's title gives it: the renderer, and the
+    driver's release where GL_VERSION names one ("llvmpipe (LLVM 15.0.6,
+    256 bits) (Mesa 25.0.7)")."""
+    renderer, _, version = description.partition(" / ")
+    release = driver_release(version)
+    return f"{renderer} ({release})" if release else renderer
+
+
 def release_context(ctx: moderngl.Context) -> None:
     """Release ``ctx`` and whatever backs it (OSMesa context and buffer); idempotent."""
     ctx.release()

@@ -1064,12 +1064,10 @@ def run_bench(args, ctx, backend: str, name: str, scene, width: int, height: int
         write_output(out / "peer-time-to-error.csv", buf.getvalue().encode("utf-8"))
         write_output(out / "peer.md", text.encode("utf-8"))
         write_output(out / "peer-machine.json", (json.dumps(info, indent=2) + "\n").encode("utf-8"))
-        from .context import driver_release
+        from .context import renderer_and_release
 
-        renderer, _, version = info["gl"].partition(" / ")
-        release = driver_release(version)
         plotted = _plot(out / "peer.png", series, TARGET_ERRORS,
-                        f"glassray on {renderer}{f' ({release})' if release else ''} vs "
+                        f"glassray on {renderer_and_release(info['gl'])} vs "
                         f"Mitsuba {info['peer']['mitsuba']} ({peer.variant}, {peer.threads} threads), "
                         f"{stem} {width}x{height}, {info['cpus_usable']} CPUs, reference {ref_samples}"
                         f"{f'/{refined}' if refined else ''} spp; "

@@ -396,7 +396,7 @@ class Renderer:
         row = top, a new array.  Read as RGB: the driver drops alpha faster
         than numpy copies a strided view.  Read into a buffer kept with the
         target: a new 11 MB block for every 1280x720 read-back cost its page
-        faults, 2.4 ms of a 115 ms frame (Mesa 25, medians of 11)."""
+        faults: 2-6 ms of a 112-119 ms frame (Mesa 25)."""
         width, height = fbo.size
         size = width * height * 12
         if self._readback is None or len(self._readback) != size:
