@@ -188,6 +188,20 @@ Hits sweepMedia(vec3 o, vec3 d, float tmin, float tmax) {
 #undef SWEEP_MEDIUM
     return h;
 }
+
+// The pass after a crossing at tGroup from the last pass's origin, now
+// `step` further on along the same line: an object of the crossed group
+// (slotT <= tGroup) is met again from the new origin o; every other one's
+// nearest hit is still the one the last pass found, step nearer (it lies
+// beyond tGroup, so beyond the new tmin), with its normal.
+Hits sweepMediaOn(vec3 o, vec3 d, float tmin, float tmax, float tGroup, float step) {
+    Hits h = Hits(INF, INF, vec3(0.0), -1);
+// (one line: GLSL 3.30 has no line continuation)
+#define SWEEP_MEDIUM_ON(slot, k, shape) if (slotT[slot] <= tGroup) { vec3 n; float t = hitShape(k, shape, o, d, tmin, tmax, n); keepHit(k, slot, t, n, h); } else { slotT[slot] -= step; h.tNear = min(h.tNear, slotT[slot]); }
+    FOR_EACH_MEDIUM(SWEEP_MEDIUM_ON)
+#undef SWEEP_MEDIUM_ON
+    return h;
+}
 #endif
 
 // ---------------------------------------------------------------- media
@@ -335,7 +349,7 @@ bool nextInteraction(vec3 o, vec3 d, inout uint mask, inout vec3 atten, out Inte
         o = p;
         travelled += h.tNear;
         tmin = surfaceEps(o);
-        Hits m = sweepMedia(o, d, tmin, INF);
+        Hits m = sweepMediaOn(o, d, tmin, INF, tGroup, h.tNear);
         m.tOpaque = tOpaque0 - travelled; m.nOpaque = h.nOpaque; m.kOpaque = h.kOpaque;
         m.tNear = min(m.tNear, m.tOpaque);
         h = m;
@@ -373,7 +387,7 @@ vec3 shadowTransmittance(vec3 p, vec3 l, float dist, uint mask) {
         if (maxComponent(v) <= 0.0) return vec3(0.0);
         o = q;
         left -= h.tNear;
-        h = sweepMedia(o, l, surfaceEps(o), left);
+        h = sweepMediaOn(o, l, surfaceEps(o), left, tGroup, h.tNear);
     }
     return v;
 #endif
