@@ -173,27 +173,17 @@ Hits sweepShadow(vec3 o, vec3 d, float tmin, float tmax) {
 }
 
 #ifdef HAS_DIELECTRIC
-// A sweep over the transparent objects only: a ray's passes after its
-// first.  The first pass of a ray (or shadow ray) sweeps every object and
-// so already knows the nearest opaque surface on the whole line; once the
-// ray has crossed a transparent surface it goes on along the same line,
-// where no opaque surface can come nearer, so only the transparent
-// surfaces need finding again.  (The first pass stays outside the loops
-// that call this: llvmpipe runs both sides of a branch, even on the loop
-// counter, so a `pass == 0 ? sweep : sweepMedia` would cost both.)
-Hits sweepMedia(vec3 o, vec3 d, float tmin, float tmax) {
-    Hits h = Hits(INF, INF, vec3(0.0), -1);
-#define SWEEP_MEDIUM(slot, k, shape) { vec3 n; float t = hitShape(k, shape, o, d, tmin, tmax, n); keepHit(k, slot, t, n, h); }
-    FOR_EACH_MEDIUM(SWEEP_MEDIUM)
-#undef SWEEP_MEDIUM
-    return h;
-}
-
-// The pass after a crossing at tGroup from the last pass's origin, now
-// `step` further on along the same line: an object of the crossed group
-// (slotT <= tGroup) is met again from the new origin o; every other one's
-// nearest hit is still the one the last pass found, step nearer (it lies
-// beyond tGroup, so beyond the new tmin), with its normal.
+// A ray's pass after a crossing at tGroup from the last pass's origin, now
+// `step` further on along the same line.  The first pass of a ray (or
+// shadow ray) swept every object and so knows the nearest opaque surface
+// on the whole line: no opaque surface can come nearer along it, so only
+// the transparent objects are looked at.  Of those, an object of the
+// crossed group (slotT <= tGroup) is met again from the new origin o;
+// every other one's nearest hit is still the one the last pass found, step
+// nearer (it lies beyond tGroup, so beyond the new tmin), with its normal.
+// (The first pass stays outside the loops that call this: llvmpipe 22.3
+// runs both sides of a branch, even on the loop counter, so a
+// `pass == 0 ? sweep : sweepMediaOn` would cost both there.)
 Hits sweepMediaOn(vec3 o, vec3 d, float tmin, float tmax, float tGroup, float step) {
     Hits h = Hits(INF, INF, vec3(0.0), -1);
 // (one line: GLSL 3.30 has no line continuation)
