@@ -412,6 +412,50 @@ Surface surfaceAt(Material m, vec3 p) {
     return s;
 }
 
+// Light j and material k.  A block read at an index that differs between
+// SIMD lanes (an object's material) or that llvmpipe cannot prove the same
+// for all of them (the light loop's counter, which llvmpipe keeps per lane) is a gather: every component of every lane loaded on its own,
+// through its own address.  These two were a sixth of the time of the
+// default scene's frame (perf: 16% of its samples in per-lane loads).  So
+// the specialised shader reads every light and material at a constant
+// index, one broadcast each, and keeps the one asked for, which costs a
+// select per component and entry: cheaper than the gather up to about 8
+// entries (a gather is some 17 instructions a component, a select 2), so
+// larger scenes keep the gather.  The values are the same either way.
+#if !defined(GENERIC) && LIGHTS_LEN <= 8
+Light pickLight(int j) {
+    Light light = lights[0];
+    for (int q = 1; q < LIGHTS_LEN; ++q) {
+        light.vector = j == q ? lights[q].vector : light.vector;
+        light.radiance = j == q ? lights[q].radiance : light.radiance;
+    }
+    return light;
+}
+#else
+Light pickLight(int j) { return lights[j]; }
+#endif
+
+#if !defined(GENERIC) && MATERIALS_LEN <= 8
+Material pickMaterial(int k) {
+    int index = objects[k].info.y;
+    Material m = materials[0];
+    for (int q = 1; q < MATERIALS_LEN; ++q) {
+        bool hit = index == q;
+        m.colorAmbient = hit ? materials[q].colorAmbient : m.colorAmbient;
+        m.phong = hit ? materials[q].phong : m.phong;
+        m.dielectric = hit ? materials[q].dielectric : m.dielectric;
+        m.absorption = hit ? materials[q].absorption : m.absorption;
+        m.emission = hit ? materials[q].emission : m.emission;
+        m.checkerColor = hit ? materials[q].checkerColor : m.checkerColor;
+        m.checkerEmission = hit ? materials[q].checkerEmission : m.checkerEmission;
+        m.checkerOffset = hit ? materials[q].checkerOffset : m.checkerOffset;
+    }
+    return m;
+}
+#else
+Material pickMaterial(int k) { return materials[objects[k].info.y]; }
+#endif
+
 // The light a surface's colour C takes at p, the bracket of
 // E + C * (k_a A + sum_j L_j V_j [n.l > 0] (k_d n.l + k_s max(0, r.v)^p)).
 vec3 lightAt(Material m, vec3 p, vec3 n, vec3 v, uint mask) {
@@ -420,7 +464,7 @@ vec3 lightAt(Material m, vec3 p, vec3 n, vec3 v, uint mask) {
     float kd = m.phong.x, ks = m.phong.y;
     if (kd > 0.0 || ks > 0.0) {
         for (int j = 0; j < NUM_LIGHTS; ++j) {
-            Light light = lights[j];
+            Light light = pickLight(j);
             vec3 l;
             float dist;
             if (light.vector.w > 0.5) { l = -light.vector.xyz; dist = INF; }
@@ -514,7 +558,7 @@ void walkNode(Branch br, inout vec3 sum, out Branch reflected, out Branch refrac
     }
     RECORD_FIRST(br, it)
     if (maxComponent(w) <= 0.0) return;
-    Material m = materials[objects[it.object].info.y];
+    Material m = pickMaterial(it.object);
     vec3 n = dot(it.n, br.d) < 0.0 ? it.n : -it.n;     // facing the ray
     Surface s = surfaceAt(m, it.p);
 #ifdef FOOTPRINT_AA
@@ -643,6 +687,47 @@ uvec2 pathAt(uvec2 p, int level, bool one) {
 #endif
 
 #ifdef HAS_DIELECTRIC
+// The stack of waiting branches, one array per scalar of a Branch: an
+// array indexed by a per-lane value (sp) lives in memory, where llvmpipe
+// stores and loads it lane by lane, and an array of structs went through
+// more of that per field than separate arrays do (2% of the default
+// scene's frame).  The chain id is kept only where something reads it.
+#if defined(FOOTPRINT_AA) || defined(ADAPTIVE_FIRST)
+#define TRACK_CHAINS
+float stackChain[STACK_SIZE];
+#endif
+float stackOx[STACK_SIZE], stackOy[STACK_SIZE], stackOz[STACK_SIZE];
+float stackDx[STACK_SIZE], stackDy[STACK_SIZE], stackDz[STACK_SIZE];
+float stackWx[STACK_SIZE], stackWy[STACK_SIZE], stackWz[STACK_SIZE];
+int stackDepth[STACK_SIZE];
+uint stackMask[STACK_SIZE];
+
+// Pushes b where there is room (sp < STACK_SIZE; see radiance for why
+// there always is).
+void pushBranch(inout int sp, Branch b) {
+    if (sp >= STACK_SIZE) return;
+    stackOx[sp] = b.o.x; stackOy[sp] = b.o.y; stackOz[sp] = b.o.z;
+    stackDx[sp] = b.d.x; stackDy[sp] = b.d.y; stackDz[sp] = b.d.z;
+    stackWx[sp] = b.w.x; stackWy[sp] = b.w.y; stackWz[sp] = b.w.z;
+    stackDepth[sp] = b.depth;
+    stackMask[sp] = b.mask;
+#ifdef TRACK_CHAINS
+    stackChain[sp] = b.chain;
+#endif
+    ++sp;
+}
+
+// The last branch pushed (sp > 0), taken off.
+Branch popBranch(inout int sp) {
+    --sp;
+    Branch b = Branch(vec3(stackOx[sp], stackOy[sp], stackOz[sp]), vec3(stackDx[sp], stackDy[sp], stackDz[sp]),
+                      vec3(stackWx[sp], stackWy[sp], stackWz[sp]), stackDepth[sp], stackMask[sp], -1.0);
+#ifdef TRACK_CHAINS
+    b.chain = stackChain[sp];
+#endif
+    return b;
+}
+
 // The children a node's walk follows (n of them), the heavier one in a.
 int followed(Branch reflected, Branch refracted, float minWeight, out Branch a, out Branch b) {
     bool r = worthFollowing(reflected.w, minWeight), t = worthFollowing(refracted.w, minWeight);
@@ -655,8 +740,7 @@ int followed(Branch reflected, Branch refracted, float minWeight, out Branch a, 
 
 vec3 radiance(vec3 origin, vec3 dir) {
 #ifdef HAS_DIELECTRIC
-    Branch stack[STACK_SIZE];
-    int sp = 0;
+    int sp = 0;     // branches waiting on the stack
 #endif
     float minWeight = params.z;
     vec3 sum = vec3(0.0);
@@ -679,7 +763,7 @@ vec3 radiance(vec3 origin, vec3 dir) {
             bool second = ((level < 32 ? st.x >> uint(level) : st.y >> uint(level - 32)) & 1u) != 0u;
             if (second) br = b;
             else {
-                if (n == 2 && sp < STACK_SIZE) stack[sp++] = b;
+                if (n == 2) pushBranch(sp, b);
                 br = a;
             }
         }
@@ -711,9 +795,9 @@ vec3 radiance(vec3 origin, vec3 dir) {
 #ifdef HAS_DIELECTRIC
         Branch a, b;
         int n = followed(reflected, refracted, minWeight, a, b);
-        if (n == 2 && sp < STACK_SIZE) stack[sp++] = b;
+        if (n == 2) pushBranch(sp, b);
         if (n > 0) br = a;
-        else if (sp > 0) br = stack[--sp];
+        else if (sp > 0) br = popBranch(sp);
         else walking = false;
 #if defined(RESUME)
         // a child one level down the first way, or a waiting branch: the
