@@ -238,6 +238,16 @@ vec3 absorptionOf(int medium) {
 
 float iorOf(int medium) { return mediumOptics(medium).x; }
 
+// exp(-a t): what is left after t through a medium of absorption a.  Most
+// rays travel in air or a clear medium (a = 0), where exp(0) = 1 exactly:
+// behind the branch, a SIMD group all of whose rays do skips the three
+// exponentials (Mesa 25's llvmpipe skips a branch no lane takes; 2% of the
+// default scene's frame).
+vec3 beerLambert(vec3 a, float t) {
+    if (any(greaterThan(a, vec3(0.0)))) return exp(-a * t);
+    return vec3(1.0);
+}
+
 // Offsets for leaving a surface: relative to the magnitude of the point (the
 // float32 error of a hit point grows with it) plus a small absolute floor tied
 // to the scene's size; both far below the thinnest wall.
@@ -314,17 +324,17 @@ bool nextInteraction(vec3 o, vec3 d, inout uint mask, inout vec3 atten, out Inte
     for (int pass = 0; pass < MAX_PASSES; ++pass) {
         vec3 a = absorptionOf(mediumOf(mask));
         if (h.tNear >= INF) {
-            atten *= exp(-a * INF);     // escaping through an absorbing medium: nothing left
+            atten *= beerLambert(a, INF);     // escaping through an absorbing medium: nothing left
             return false;
         }
         vec3 p = o + h.tNear * d;
         float tGroup = h.tNear + surfaceEps(p);
         if (h.tOpaque <= tGroup) {
-            atten *= exp(-a * h.tOpaque);
+            atten *= beerLambert(a, h.tOpaque);
             it.p = o0 + tOpaque0 * d; it.n = h.nOpaque; it.object = h.kOpaque;
             return true;
         }
-        atten *= exp(-a * h.tNear);
+        atten *= beerLambert(a, h.tNear);
         Crossing c = crossGroup(p + 2.0 * surfaceEps(p) * d, tGroup, mask);
         if (mediumOf(c.after) != mediumOf(mask)) {
             it.p = p; it.object = c.object; it.dielectric = true; it.maskAfter = c.after;
@@ -367,10 +377,10 @@ vec3 shadowTransmittance(vec3 p, vec3 l, float dist, uint mask) {
     if (h.tOpaque < left) return vec3(0.0);
     for (int pass = 0; pass < MAX_PASSES; ++pass) {
         vec3 a = absorptionOf(mediumOf(mask));
-        if (h.tNear >= left) return v * exp(-a * min(left, INF));
+        if (h.tNear >= left) return v * beerLambert(a, min(left, INF));
         vec3 q = o + h.tNear * l;
         float tGroup = h.tNear + surfaceEps(q);
-        v *= exp(-a * h.tNear);
+        v *= beerLambert(a, h.tNear);
         Crossing c = crossGroup(q + 2.0 * surfaceEps(q) * l, tGroup, mask);
         if (mediumOf(c.after) != mediumOf(mask)) v *= mediumOptics(c.slot).y;
         mask = c.after;
@@ -520,10 +530,19 @@ vec3 lightAt(Material m, vec3 p, vec3 n, vec3 v, uint mask) {
 // rays' chainLeaf use it.
 struct Branch { vec3 o; vec3 d; vec3 w; int depth; uint mask; float chain; };
 
+// Chains are followed only where something reads them (footprint samples,
+// the adaptive first pass); elsewhere every branch has chain -1, and the
+// hash below is not computed (it is per-lane integer conversion, which
+// llvmpipe does lane by lane: 2% of the default scene's frame).
+#if defined(FOOTPRINT_AA) || defined(ADAPTIVE_FIRST)
+#define TRACK_CHAINS
+#endif
+
 // The id after a crossing of `object` through the face of outward normal n
 // (its largest axis and sign), refracted or reflected: a 24-bit hash, held
 // exactly by a float, never 0.
 float chainStep(float chain, int object, vec3 n, bool reflected) {
+#ifdef TRACK_CHAINS
     if (chain < 0.0) return -1.0;
     vec3 a = abs(n);
     int axis = a.x >= a.y && a.x >= a.z ? 0 : (a.y >= a.z ? 1 : 2);
@@ -531,6 +550,9 @@ float chainStep(float chain, int object, vec3 n, bool reflected) {
     uint code = uint(object) * 16u + uint(face) * 2u + (reflected ? 1u : 0u) + 1u;
     uint h = (uint(chain) * 1031u + code) & 0xFFFFFFu;
     return float(h == 0u ? 1u : h);
+#else
+    return -1.0;
+#endif
 }
 
 // A child is followed when its weight reaches min_weight (and is not zero).
@@ -691,9 +713,8 @@ uvec2 pathAt(uvec2 p, int level, bool one) {
 // array indexed by a per-lane value (sp) lives in memory, where llvmpipe
 // stores and loads it lane by lane, and an array of structs went through
 // more of that per field than separate arrays do (2% of the default
-// scene's frame).  The chain id is kept only where something reads it.
-#if defined(FOOTPRINT_AA) || defined(ADAPTIVE_FIRST)
-#define TRACK_CHAINS
+// scene's frame).  The chain id is kept only where chains are followed.
+#ifdef TRACK_CHAINS
 float stackChain[STACK_SIZE];
 #endif
 float stackOx[STACK_SIZE], stackOy[STACK_SIZE], stackOz[STACK_SIZE];
