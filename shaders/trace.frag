@@ -424,42 +424,48 @@ Surface surfaceAt(Material m, vec3 p) {
 
 // Light j and material k.  A block read at an index that differs between
 // SIMD lanes (an object's material) or that llvmpipe cannot prove the same
-// for all of them (the light loop's counter, which llvmpipe keeps per lane) is a gather: every component of every lane loaded on its own,
-// through its own address.  These two were a sixth of the time of the
-// default scene's frame (perf: 16% of its samples in per-lane loads).  So
-// the specialised shader reads every light and material at a constant
-// index, one broadcast each, and keeps the one asked for, which costs a
-// select per component and entry: cheaper than the gather up to about 8
-// entries (a gather is some 17 instructions a component, a select 2), so
-// larger scenes keep the gather.  The values are the same either way.
-#if !defined(GENERIC) && LIGHTS_LEN <= 8
+// for all of them (the light loop's counter, which it keeps per lane) is a
+// gather: every component of every lane loaded on its own, through its own
+// address.  These two were a sixth of the time of the default scene's
+// frame (perf: 16% of its samples in per-lane loads).  So where a scene
+// has at most 8 of them (gpu_scene.PICK_MAX) the specialised shader reads
+// every light and material at a literal index, one broadcast each, and
+// keeps the one asked for: a select per component and entry, cheaper than
+// the gather (some 17 instructions a component against 2).  The indices
+// come as literals (SCENE_LIGHT_INDICES(X), SCENE_MATERIAL_INDICES(X):
+// X(1) .. X(n - 1)), not as a loop's counter: Mesa 22.3 does not unroll
+// such a loop, and its counter made every read a gather again (the default
+// frame 25% slower there).  The values are the same either way.
+#ifdef SCENE_LIGHT_INDICES
 Light pickLight(int j) {
     Light light = lights[0];
-    for (int q = 1; q < LIGHTS_LEN; ++q) {
-        light.vector = j == q ? lights[q].vector : light.vector;
-        light.radiance = j == q ? lights[q].radiance : light.radiance;
-    }
+#define PICK_LIGHT(q) light.vector = j == q ? lights[q].vector : light.vector; light.radiance = j == q ? lights[q].radiance : light.radiance;
+    SCENE_LIGHT_INDICES(PICK_LIGHT)
+#undef PICK_LIGHT
     return light;
 }
 #else
 Light pickLight(int j) { return lights[j]; }
 #endif
 
-#if !defined(GENERIC) && MATERIALS_LEN <= 8
+#ifdef SCENE_MATERIAL_INDICES
+void keepMaterialIf(bool hit, int q, inout Material m) {
+    m.colorAmbient = hit ? materials[q].colorAmbient : m.colorAmbient;
+    m.phong = hit ? materials[q].phong : m.phong;
+    m.dielectric = hit ? materials[q].dielectric : m.dielectric;
+    m.absorption = hit ? materials[q].absorption : m.absorption;
+    m.emission = hit ? materials[q].emission : m.emission;
+    m.checkerColor = hit ? materials[q].checkerColor : m.checkerColor;
+    m.checkerEmission = hit ? materials[q].checkerEmission : m.checkerEmission;
+    m.checkerOffset = hit ? materials[q].checkerOffset : m.checkerOffset;
+}
+
 Material pickMaterial(int k) {
     int index = objects[k].info.y;
     Material m = materials[0];
-    for (int q = 1; q < MATERIALS_LEN; ++q) {
-        bool hit = index == q;
-        m.colorAmbient = hit ? materials[q].colorAmbient : m.colorAmbient;
-        m.phong = hit ? materials[q].phong : m.phong;
-        m.dielectric = hit ? materials[q].dielectric : m.dielectric;
-        m.absorption = hit ? materials[q].absorption : m.absorption;
-        m.emission = hit ? materials[q].emission : m.emission;
-        m.checkerColor = hit ? materials[q].checkerColor : m.checkerColor;
-        m.checkerEmission = hit ? materials[q].checkerEmission : m.checkerEmission;
-        m.checkerOffset = hit ? materials[q].checkerOffset : m.checkerOffset;
-    }
+#define PICK_MATERIAL(q) keepMaterialIf(index == q, q, m);
+    SCENE_MATERIAL_INDICES(PICK_MATERIAL)
+#undef PICK_MATERIAL
     return m;
 }
 #else

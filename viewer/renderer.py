@@ -15,7 +15,7 @@ from typing import Callable
 import moderngl
 import numpy as np
 
-from .gpu_scene import F32_MAX, camera_uniforms, gpu_frame_scene, pack_scene, radiance_exponent
+from .gpu_scene import F32_MAX, camera_uniforms, driver_defines, gpu_frame_scene, pack_scene, radiance_exponent
 from . import interrupt
 from .imageio import SkyImageError, read_sky_image
 from .sampling import sample_offsets
@@ -77,7 +77,8 @@ class Renderer:
         """specialise=False uses the generic all-features shader and
         fresnel="schlick" Schlick's approximation: both only for comparisons
         in the benchmark.  extra_defines are added to every program (the
-        stress suite's NAIVE_INTERSECT).
+        stress suite's NAIVE_INTERSECT), after the driver's own
+        (gpu_scene.driver_defines).
 
         eager: set_scene compiles the scene's full program at once, so that
         a shader the driver rejects fails there (the viewer keeps its last
@@ -92,7 +93,9 @@ class Renderer:
         self.tile = tile
         self.specialise = specialise
         self.fresnel = fresnel
-        self.extra_defines = dict(extra_defines or {})
+        info = getattr(ctx, "info", None) or {}
+        self.extra_defines = {**driver_defines(str(info.get("GL_RENDERER", "")), str(info.get("GL_VERSION", ""))),
+                              **dict(extra_defines or {})}
         self._force_resume = False          # render(): the one-pass image was cut, drawn again
         self.last_render_resumed = False    # whether the last render() took resumable passes
         self._programs: dict[tuple, moderngl.Program] = {}

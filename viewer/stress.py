@@ -841,8 +841,9 @@ def intersection_errors(ctx, cameras_per_kind: int = 8, seed: int = 1,
                 rt = rt.reshape(h, w)
                 rhit = robj.reshape(h, w) >= 0
                 rays += w * h
+                base = {k: v for k, v in renderer.extra_defines.items() if k != "NAIVE_INTERSECT"}
                 for naive in (False, True):
-                    renderer.extra_defines = {"NAIVE_INTERSECT": True} if naive else {}
+                    renderer.extra_defines = {**base, "NAIVE_INTERSECT": True} if naive else base
                     renderer.set_scene(scene)
                     t, gobj, _ = renderer.first_hits(w, h, tuple(off))
                     ghit = gobj >= 0
