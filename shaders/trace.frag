@@ -422,20 +422,24 @@ Surface surfaceAt(Material m, vec3 p) {
     return s;
 }
 
-// Light j and material k.  A block read at an index that differs between
-// SIMD lanes (an object's material) or that llvmpipe cannot prove the same
-// for all of them (the light loop's counter, which it keeps per lane) is a
-// gather: every component of every lane loaded on its own, through its own
-// address.  These two were a sixth of the time of the default scene's
-// frame (perf: 16% of its samples in per-lane loads).  So where a scene
+// Light j, and the material of object k.  A block read at an index that
+// differs between SIMD lanes (an object's material) or that llvmpipe
+// cannot prove the same for all of them (the light loop's counter, which
+// it keeps per lane) is a gather: every component of every lane loaded on
+// its own, through its own address.  In the default scene's frame these
+// two were most of the 16% of perf's samples that fell in per-lane loads
+// (tools/jit_profile.py), and the selects below made it 5% faster on
+// Mesa 25.  So where a scene
 // has at most 8 of them (gpu_scene.PICK_MAX) the specialised shader reads
 // every light and material at a literal index, one broadcast each, and
 // keeps the one asked for: a select per component and entry, cheaper than
 // the gather (some 17 instructions a component against 2).  The indices
 // come as literals (SCENE_LIGHT_INDICES(X), SCENE_MATERIAL_INDICES(X):
-// X(1) .. X(n - 1)), not as a loop's counter: Mesa 22.3 does not unroll
-// such a loop, and its counter made every read a gather again (the default
-// frame 25% slower there).  The values are the same either way.
+// X(1) .. X(n - 1)), not as a loop's counter, so that no driver has to
+// unroll a loop to see constants.  On Mesa 22.3's llvmpipe the material
+// selects made the default frame 25% slower, so there the renderer drops
+// SCENE_MATERIAL_INDICES (gpu_scene.driver_defines) and the gather stays.
+// The values are the same either way.
 #ifdef SCENE_LIGHT_INDICES
 Light pickLight(int j) {
     Light light = lights[0];
