@@ -390,10 +390,11 @@ PICK_MAX = 8
 
 def index_list_macros(scene: Scene) -> dict[str, str]:
     """SCENE_LIGHT_INDICES(X) and SCENE_MATERIAL_INDICES(X): X(1) .. X(n - 1)
-    for the scene's n lights and n materials, where 1 < n <= PICK_MAX (with
-    one, index 0 is the only one: an empty list).  The counts are already
-    compile-time constants (the block's array lengths), so these add no
-    recompiles; none for more than PICK_MAX (the shader gathers)."""
+    for the scene's n lights and n materials where 1 <= n <= PICK_MAX (with
+    one, an empty list: index 0 is read anyway).  None for 0 or for more
+    than PICK_MAX (the shader gathers).  The counts are compile-time
+    constants already (the block's array lengths), so these add no
+    recompiles."""
     out = {}
     for name, n in (("SCENE_LIGHT_INDICES(X)", len(scene.lights)),
                     ("SCENE_MATERIAL_INDICES(X)", len(scene.materials))):
