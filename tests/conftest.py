@@ -4,6 +4,9 @@ Mesa's llvmpipe on CI), golden-image options, and small scene builders."""
 from __future__ import annotations
 
 import copy
+import os
+import subprocess
+import time
 from pathlib import Path
 
 import numpy as np
@@ -29,7 +32,7 @@ _SESSION: dict = {}
 @pytest.fixture(scope="session")
 def gl():
     """One EGL context for the whole session."""
-    from viewer.context import create_offscreen_context
+    from viewer.gpu.context import create_offscreen_context
 
     ctx, _backend = create_offscreen_context("egl")
     _SESSION["ctx"] = ctx
@@ -51,7 +54,7 @@ def _gl_current():
 @pytest.fixture
 def render(gl):
     """render(scene, w, h, samples=1, seed=0) -> (H, W, 3) float32 linear."""
-    from viewer.renderer import Renderer
+    from viewer.gpu.renderer import Renderer
 
     made = []
 
@@ -66,7 +69,7 @@ def render(gl):
 
 
 def make_scene(doc: dict, name: str = "test"):
-    from viewer.scene import scene_from_dict
+    from viewer.scene.load import scene_from_dict
 
     return scene_from_dict(copy.deepcopy(doc), source=f"<{name}>", default_name=name)
 
@@ -85,3 +88,57 @@ def no_matplotlib_env(tmp_path) -> dict:
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join(p for p in (str(stub.parent), env.get("PYTHONPATH", "")) if p)
     return env
+
+
+# ---------------------------------------------------------------- X server
+
+
+@pytest.fixture(scope="module")
+def xdisplay():
+    for n in range(90, 190):
+        if os.path.exists(f"/tmp/.X{n}-lock") or os.path.exists(f"/tmp/.X11-unix/X{n}"):
+            continue
+        proc = subprocess.Popen(["Xvfb", f":{n}", "-screen", "0", "1024x768x24", "-nolisten", "tcp"],
+                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        deadline = time.monotonic() + 15
+        while time.monotonic() < deadline and proc.poll() is None:
+            if os.path.exists(f"/tmp/.X11-unix/X{n}"):
+                break
+            time.sleep(0.05)
+        if proc.poll() is None and os.path.exists(f"/tmp/.X11-unix/X{n}"):
+            time.sleep(0.2)
+            try:
+                yield f":{n}"
+            finally:
+                proc.terminate()
+                try:
+                    proc.wait(timeout=10)
+                except subprocess.TimeoutExpired:
+                    proc.kill()
+            return
+        proc.kill()
+        proc.wait()
+    pytest.skip("no free X display number for Xvfb")
+
+
+# ---------------------------------------------------------------- markers
+
+#: Fixtures that mean a test draws with OpenGL (llvmpipe here) or opens a
+#: real window on an X server; the markers follow from them, so that
+#: `pytest -m "not window"` or `-m "not gl"` selects by what a test needs.
+GL_FIXTURES = {"gl", "render"}
+WINDOW_FIXTURES = {"xdisplay"}
+
+
+def pytest_configure(config):
+    config.addinivalue_line("markers", "gl: draws with an OpenGL context (EGL, llvmpipe on a machine without a GPU)")
+    config.addinivalue_line("markers", "window: opens a real GLFW window on an Xvfb server (needs Xvfb and xdotool)")
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        used = set(getattr(item, "fixturenames", ()))
+        if used & WINDOW_FIXTURES:
+            item.add_marker(pytest.mark.window)
+        if used & GL_FIXTURES:
+            item.add_marker(pytest.mark.gl)

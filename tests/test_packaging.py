@@ -66,7 +66,7 @@ def test_wheel_carries_every_shader_and_scene(wheel_site):
     names = set(zipfile.ZipFile(whl).namelist())
     want = {f"viewer/glsl/{p.relative_to(ROOT / 'shaders').as_posix()}"
             for p in (ROOT / "shaders").rglob("*") if p.is_file() and p.suffix in (".frag", ".vert", ".glsl")}
-    want |= {f"viewer/scenes/{p.name}" for p in (ROOT / "viewer" / "scenes").iterdir()
+    want |= {f"viewer/scene/builtin/{p.name}" for p in (ROOT / "viewer" / "scene" / "builtin").iterdir()
              if p.suffix in (".toml", ".png", ".pfm")}
     want |= {f"viewer/{p.relative_to(ROOT / 'viewer').as_posix()}" for p in (ROOT / "viewer").rglob("*.py")}
     assert len(want) > 40
@@ -95,11 +95,11 @@ sys.exit(cli.main(["render", "default", "-o", {str(out)!r}, "--size", "40x24", "
     done = subprocess.run([sys.executable, "-c", script], cwd=tmp_path, env=env,
                           capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
-    from viewer.scene import builtin_scene_names
+    from viewer.scene.load import builtin_scene_names
 
     assert done.stdout.split() == builtin_scene_names()
     mine = tmp_path / "source.npy"
-    from viewer import cli
+    from viewer.cli import commands as cli
 
     assert cli.main(["render", "default", "-o", str(mine), "--size", "40x24", "--samples", "1"]) == 0
     assert np.array_equal(np.load(out), np.load(mine))

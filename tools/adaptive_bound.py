@@ -47,10 +47,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import adaptive_vs_uniform as avu  # noqa: E402
 
-from viewer import adaptive, bench  # noqa: E402
-from viewer.adaptive import AdaptiveRender, AdaptiveSampler, Sums, drain  # noqa: E402
-from viewer.sampling import progressive_offsets  # noqa: E402
-from viewer.scene import load_scene  # noqa: E402
+from viewer.adaptive import sampler as adaptive
+from viewer.measure import bench  # noqa: E402
+from viewer.adaptive.sampler import AdaptiveRender, AdaptiveSampler, Sums, drain  # noqa: E402
+from viewer.base.sampling import progressive_offsets  # noqa: E402
+from viewer.scene.load import load_scene  # noqa: E402
 
 W, H = avu.W, avu.H
 RECORD = 256                       # samples recorded per flagged pixel (max_spp at a budget of 32)
@@ -187,7 +188,7 @@ def reach(budgets, errors, target) -> float | None:
 def measure(names: list[str]) -> list[dict]:
     import moderngl
 
-    from viewer.renderer import Renderer
+    from viewer.gpu.renderer import Renderer
 
     ctx = moderngl.create_standalone_context(backend="egl")
     rows = []

@@ -24,16 +24,16 @@ import time
 
 import moderngl
 
-from viewer import bench
+from viewer.measure import bench
 import numpy as np
 
-from viewer.adaptive import AdaptiveRender, AdaptiveSampler, drain, footprint_planes
-from viewer.renderer import Renderer
-from viewer.scene import load_scene
+from viewer.adaptive.sampler import AdaptiveRender, AdaptiveSampler, drain, footprint_planes
+from viewer.gpu.renderer import Renderer
+from viewer.scene.load import load_scene
 
 
 def passes(name: str, w: int = 320, h: int = 180) -> None:
-    from viewer.sampling import progressive_offsets
+    from viewer.base.sampling import progressive_offsets
 
     ctx = moderngl.create_standalone_context(backend="egl")
     r = Renderer(ctx, load_scene(name))
@@ -65,7 +65,7 @@ def passes(name: str, w: int = 320, h: int = 180) -> None:
 
 
 def glass(name: str, w: int = 320, h: int = 180) -> None:
-    from viewer.adaptive import HEAVY_RAYS, _offsets, image_coherent_order
+    from viewer.adaptive.sampler import HEAVY_RAYS, _offsets, image_coherent_order
 
     ctx = moderngl.create_standalone_context(backend="egl")
     r = Renderer(ctx, load_scene(name))

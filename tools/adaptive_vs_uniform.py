@@ -38,8 +38,8 @@ from pathlib import Path
 
 import numpy as np
 
-from viewer import bench
-from viewer.scene import load_scene
+from viewer.measure import bench
+from viewer.scene.load import load_scene
 
 W, H = 320, 180
 REFERENCE_SAMPLES = 512
@@ -63,8 +63,8 @@ def own_reference_path(name: str) -> Path:
 
 
 def references(names: list[str]) -> None:
-    from viewer.reference import camera_rays, trace
-    from viewer.sampling import sample_offsets
+    from viewer.reference.trace import camera_rays, trace
+    from viewer.base.sampling import sample_offsets
 
     OUT.mkdir(parents=True, exist_ok=True)
     for name in names:
@@ -90,8 +90,8 @@ def references(names: list[str]) -> None:
 def measure(names: list[str]) -> None:
     import moderngl
 
-    from viewer.adaptive import DEFAULT_TARGET_ERROR, AdaptiveSampler, render_adaptive
-    from viewer.renderer import Renderer
+    from viewer.adaptive.sampler import DEFAULT_TARGET_ERROR, AdaptiveSampler, render_adaptive
+    from viewer.gpu.renderer import Renderer
 
     ctx = moderngl.create_standalone_context(backend="egl")
     rows = []

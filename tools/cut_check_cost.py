@@ -17,8 +17,8 @@ import time
 import moderngl
 import numpy as np
 
-from viewer.renderer import Renderer
-from viewer.scene import load_scene
+from viewer.gpu.renderer import Renderer
+from viewer.scene.load import load_scene
 
 ap = argparse.ArgumentParser()
 ap.add_argument("--size", default="1280x720")

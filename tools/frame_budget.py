@@ -31,8 +31,8 @@ import sys
 import moderngl
 
 from _frame_groups import median_time, timed_groups
-from viewer.renderer import Renderer
-from viewer.scene import load_scene
+from viewer.gpu.renderer import Renderer
+from viewer.scene.load import load_scene
 
 
 def simd_waste(rays, rects, height: int) -> float:

@@ -38,10 +38,10 @@ from pathlib import Path
 import moderngl
 import numpy as np
 
-from viewer.context import create_offscreen_context, describe
-from viewer.imageio import linear_to_srgb
-from viewer.renderer import Renderer
-from viewer.scene import builtin_scene_names, load_scene
+from viewer.gpu.context import create_offscreen_context, describe
+from viewer.base.imageio import linear_to_srgb
+from viewer.gpu.renderer import Renderer
+from viewer.scene.load import builtin_scene_names, load_scene
 
 SIZE = (320, 180)
 SAMPLES = 4

@@ -104,8 +104,8 @@ def _child(scene_name: str, size: str, frames: int, out: Path) -> None:
     """Render under perf, then copy the executable anonymous mappings."""
     import moderngl
 
-    from viewer.renderer import Renderer
-    from viewer.scene import load_scene
+    from viewer.gpu.renderer import Renderer
+    from viewer.scene.load import load_scene
 
     w, h = (int(v) for v in size.split("x"))
     ctx = moderngl.create_standalone_context(backend="egl")

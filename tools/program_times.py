@@ -32,7 +32,7 @@ def timed_program(self, **kw):
 
 moderngl.Context.program = timed_program
 
-from viewer.cli import main  # noqa: E402  (after the wrap, so every program is seen)
+from viewer.cli.commands import main  # noqa: E402  (after the wrap, so every program is seen)
 
 try:
     rc = main(sys.argv[1:])

@@ -18,9 +18,9 @@ import moderngl
 import numpy as np
 
 from _frame_groups import median_time, timed_groups
-from viewer import culling
-from viewer.renderer import Renderer
-from viewer.scene import load_scene
+from viewer.gpu import culling
+from viewer.gpu.renderer import Renderer
+from viewer.scene.load import load_scene
 
 W, H = 1280, 720
 ctx = moderngl.create_standalone_context(backend="egl")

@@ -18,9 +18,9 @@ import time
 import moderngl
 import numpy as np
 
-from viewer.scene import load_scene
-from viewer.renderer import Renderer
-from viewer.progressive import Progressive
+from viewer.scene.load import load_scene
+from viewer.gpu.renderer import Renderer
+from viewer.window.progressive import Progressive
 ctx = moderngl.create_standalone_context(backend="egl")
 W, H = 320, 180
 window = ctx.simple_framebuffer((W, H), components=4)

@@ -1,3 +1,5 @@
 """glassray: a real-time Whitted ray tracer for a rod in a glass of liquid."""
 
-__version__ = "0.1.0"
+from .base.version import __version__
+
+__all__ = ["__version__"]

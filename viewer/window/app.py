@@ -1,0 +1,1112 @@
+"""The interactive viewer: the one module that uses GLFW.
+
+It opens the window (OpenGL 3.3 core or newer), turns GLFW's events into
+calls on :class:`viewer.controls.Controls`, runs the loop and draws with the
+shared renderer through :class:`viewer.progressive.Progressive` (previews at
+a reduced resolution while something moves, accumulation at full
+resolution when it stops -- with `--adaptive` (or the panel) only the pixels
+that still need samples get more after the first full sample -- and nothing at
+all once the scene's ``samples`` are reached: the loop then sleeps in
+``glfw.wait_events``).  The settings panel,
+the HUD and the help overlay are Dear ImGui (imgui-bundle) widgets from
+viewer/ui.py; without imgui-bundle the viewer still runs, with the HUD in
+the window title and the help on stdout.
+"""
+
+from __future__ import annotations
+
+import copy
+import ctypes
+import math
+import os
+import sys
+import time
+from dataclasses import fields
+
+# imgui-bundle ships its own GLFW library and points the glfw package at it,
+# so it must be imported before glfw (one GLFW for both).
+_imgui = None
+IMGUI_ERROR: str | None = None
+if os.environ.get("GLASSRAY_NO_IMGUI"):
+    IMGUI_ERROR = "disabled by GLASSRAY_NO_IMGUI"
+else:
+    try:
+        from imgui_bundle import imgui as _imgui  # type: ignore[no-redef]
+    except Exception as _e:  # ImportError, or a broken binary wheel
+        _imgui = None
+        IMGUI_ERROR = f"{type(_e).__name__}: {_e}"
+
+import glfw  # noqa: E402
+import moderngl  # noqa: E402
+import numpy as np  # noqa: E402
+
+from ..base import interrupt
+from .controls import HELP_ALL, VIEWS, Controls, merge_reloaded  # noqa: E402
+from .progressive import Progressive  # noqa: E402
+from ..gpu.renderer import Renderer  # noqa: E402
+from ..scene.model import Scene, SceneError  # noqa: E402
+from .screenshot import save_linear, save_rgb8  # noqa: E402
+
+#: After the last change, the view counts as still (full resolution) after this long.
+SETTLE_S = 0.12
+#: Frame time the previews aim for, ms.
+DEFAULT_TARGET_MS = 33.0
+#: While samples accumulate, the window shows the progress this often (s).
+ACCUMULATE_DISPLAY_S = 0.25
+#: An idle viewer still wakes this often (s), so that Ctrl-C in its terminal ends it.
+IDLE_WAKE_S = 0.5
+#: How long a HUD message stays.
+MESSAGE_S = 4.0
+#: Time per frame given to measuring for "max error" (at least one pass).
+QUALITY_STEP_S = 0.05
+#: What the HUD says of each debug view.
+VIEW_NAMES = {"cost": "cost (rays traced per pixel)", "normals": "normals (first hit)",
+              "depth": "depth (first hit, log scale)", "objects": "objects (first hit)"}
+
+_KEYS = {getattr(glfw, f"KEY_{c.upper()}"): c for c in "wsadqerphv"}
+_KEYS.update({getattr(glfw, f"KEY_{d}"): str(d) for d in range(1, 10)})
+_KEYS.update({getattr(glfw, f"KEY_KP_{d}"): str(d) for d in range(1, 10)})
+_KEYS.update({glfw.KEY_TAB: "tab", glfw.KEY_F1: "f1", glfw.KEY_F5: "f5", glfw.KEY_F12: "f12",
+              glfw.KEY_ESCAPE: "escape"})
+_BUTTONS = {glfw.MOUSE_BUTTON_LEFT: "left", glfw.MOUSE_BUTTON_RIGHT: "right", glfw.MOUSE_BUTTON_MIDDLE: "middle"}
+
+
+class WindowError(RuntimeError):
+    """No window or no OpenGL 3.3 context (the CLI turns it into exit 1)."""
+
+
+def _no_window_message(detail: str) -> str:
+    disp = os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY") or "(not set)"
+    return (f"cannot open a window on display {disp}: {detail}. "
+            "Render offscreen instead: glassray render -o out.png")
+
+
+def _init_glfw() -> list[str]:
+    errors: list[str] = []
+
+    def on_error(code, desc):
+        errors.append(desc.decode("utf-8", "replace") if isinstance(desc, bytes) else str(desc))
+
+    glfw.ERROR_REPORTING = "ignore"  # reported through on_error and the checks below
+    glfw.set_error_callback(on_error)
+    if not glfw.init():
+        raise WindowError(_no_window_message(errors[-1] if errors else "GLFW could not start"))
+    return errors
+
+
+def _create_window(width: int, height: int, title: str, visible: bool, errors: list[str]):
+    glfw.default_window_hints()
+    glfw.window_hint(glfw.CONTEXT_VERSION_MAJOR, 3)
+    glfw.window_hint(glfw.CONTEXT_VERSION_MINOR, 3)
+    glfw.window_hint(glfw.OPENGL_PROFILE, glfw.OPENGL_CORE_PROFILE)
+    glfw.window_hint(glfw.OPENGL_FORWARD_COMPAT, True)
+    glfw.window_hint(glfw.SCALE_TO_MONITOR, True)
+    glfw.window_hint(glfw.VISIBLE, visible)
+    win = glfw.create_window(width, height, title, None, None)
+    if not win:
+        raise WindowError(_no_window_message(
+            f"no OpenGL 3.3 core context ({errors[-1] if errors else 'window creation failed'})"))
+    return win
+
+
+def probe(args) -> int:
+    """Exit 0 when a window with an OpenGL 3.3 core context can be opened (make run)."""
+    errors = _init_glfw()
+    try:
+        win = _create_window(64, 64, "glassray probe", False, errors)
+        glfw.make_context_current(win)
+        ctx = moderngl.create_context(require=330)
+        ctx.release()
+        glfw.destroy_window(win)
+    finally:
+        glfw.terminate()
+    return 0
+
+
+def run(args) -> int:
+    from ..base.errors import Failure
+    from ..cli.commands import _load
+    from ..gpu.context import size_failure
+
+    scene = _load(args)
+    try:
+        viewer = Viewer(args, scene, _load)
+    except WindowError as e:
+        raise Failure(str(e)) from None
+    try:
+        return viewer.run()
+    except Exception as e:
+        # a window larger than the driver can back with framebuffers fails
+        # at its first frame (Progressive.resize, which set the size it tried)
+        too_large = size_failure(e, *viewer.prog.size) if viewer.prog is not None else None
+        if too_large is None:
+            raise
+        raise too_large from e
+    finally:
+        viewer.close()
+
+
+def _rss_kb() -> int:
+    try:
+        with open("/proc/self/statm") as f:
+            return int(f.read().split()[1]) * (os.sysconf("SC_PAGE_SIZE") // 1024)
+    except (OSError, ValueError, IndexError):
+        import resource
+
+        return int(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
+
+
+class Viewer:
+    def __init__(self, args, scene: Scene, loader):
+        self.args = args
+        self.loader = loader  # args -> scene (scene file plus overrides), for F5
+        self.debug = bool(getattr(args, "debug", False))
+        self.soak = int(getattr(args, "soak", 0) or 0)
+        self.imgui = _imgui
+        self.window = None
+        self.ctx = None
+        self.renderer = None
+        self.prog = None
+        self._imgui_ready = False
+        # what close() releases, set before _open can fail (a shader that does
+        # not compile, a sky picture too large for the driver): close() then
+        # met none of them and raised AttributeError, which hid the error
+        self.quality_job = None
+        self.debug_tex = self.debug_fbo = None
+        self._errors = _init_glfw()
+        try:
+            self._open(scene)
+        except BaseException:
+            self.close()
+            raise
+
+    # ------------------------------------------------------------ setup
+
+    def _open(self, scene: Scene) -> None:
+        w, h = self.args.size
+        self.window = win = _create_window(w, h, self._title(scene), True, self._errors)
+        glfw.make_context_current(win)
+        glfw.swap_interval(1 if getattr(self.args, "vsync", True) else 0)
+        try:
+            self.ctx = moderngl.create_context(require=330)
+        except Exception as e:
+            raise WindowError(_no_window_message(f"no OpenGL 3.3 context ({e})")) from None
+
+        self.scene = scene
+        self.file_scene = copy.deepcopy(scene)  # as loaded: F5 takes what changed on disk since
+        self.good_scene = copy.deepcopy(scene)  # the last scene the renderer accepted
+        self.renderer = Renderer(self.ctx, scene)
+        # adaptive accumulation with `view --adaptive` or the panel's "adaptive"
+        # checkbox; off by default: it reaches a given error sooner, but a
+        # still view then goes on tracing several times as long (README, "Viewer")
+        self.prog = Progressive(self.ctx, self.renderer, DEFAULT_TARGET_MS,
+                                adaptive=bool(getattr(self.args, "adaptive", False)))
+        self.controls = Controls(scene, glfw.get_window_size(win))
+
+        self.show_panel = False
+        self.show_help = False
+        self.actions: list[str] = []
+        # keys that came while ImGui still had earlier input to take (it takes
+        # a few events a frame): (its event id, name, mods, action); shortcut
+        # or typed text is decided in the frame ImGui takes the key
+        self._deferred_keys: list[tuple[int, str, int, int]] = []
+        self.need_preview = True
+        self.needs_display = True
+        self.ui_frames = 2
+        self.last_change = time.perf_counter()
+        self.message = ""
+        self.message_until = 0.0
+        self._one_draw_warned = None
+        self._warn_one_draw()
+        self.frame_ms = 0.0
+        self.fps = 0.0
+        self._fps_count = 0
+        self._fps_t0 = time.perf_counter()
+        self.overhead_ms = 3.0
+        self._title_t = 0.0
+        self._last_display = 0.0
+        self._overlay_layout = None
+        self._preview_frames: list[float] = []
+        self._cursor: tuple[float, float] | None = None
+        self._want_window_shot = 0  # frames to draw before F12 reads the window back
+        self._window_shots = 0  # F12 presses waiting for it (one file each)
+        self.frames = 0
+        self.panel = None
+        # debug views (V): the picture at debug_res, shown from debug_fbo
+        self.debug_tex = self.debug_fbo = None
+        self.debug_pic = None  # uint8 (H, W, 3), the window's picture
+        self.debug_res: tuple[int, int] | None = None
+        self.debug_dirty = True
+        # "max error" (viewer.quality): the measurement in progress, the pick
+        self.quality_job = None
+        self.quality_parts = None  # (cache, candidates) of the job
+        self.quality_choice = None
+        self.quality_said = None  # (measurement, candidate, met) of the last pick printed on stderr
+        self.quality_saved = None  # render settings before the pick, restored when it is switched off
+        self.quality_status = ""
+
+        self._setup_imgui()
+        self._install_callbacks()
+        if self.imgui is None:
+            print(f"glassray: the settings panel is not available ({IMGUI_ERROR}); "
+                  "install imgui-bundle for it. The HUD is in the window title.", file=sys.stderr)
+
+    def _setup_imgui(self) -> None:
+        if self.imgui is None:
+            return
+        imgui = self.imgui
+        try:
+            from .panel import Panel
+
+            imgui.create_context()
+            imgui.get_io().set_ini_filename(None)
+            imgui.style_colors_dark()
+            addr = ctypes.cast(self.window, ctypes.c_void_p).value
+            if not imgui.backends.glfw_init_for_opengl(addr, False):
+                raise RuntimeError("the ImGui GLFW backend did not start")
+            if not imgui.backends.opengl3_init("#version 330 core"):
+                imgui.backends.glfw_shutdown()
+                raise RuntimeError("the ImGui OpenGL 3 backend did not start")
+            self._addr = addr
+            self._imgui_ready = True
+            self.panel = Panel(self.scene, DEFAULT_TARGET_MS)
+            self.panel.adaptive = self.prog.adaptive
+        except Exception as e:
+            global IMGUI_ERROR
+            IMGUI_ERROR = f"{type(e).__name__}: {e}"
+            try:
+                imgui.destroy_context()
+            except Exception:
+                pass
+            self.imgui = None
+            self.panel = None
+
+    def _install_callbacks(self) -> None:
+        win = self.window
+        glfw.set_key_callback(win, self._on_key)
+        glfw.set_char_callback(win, self._on_char)
+        glfw.set_mouse_button_callback(win, self._on_mouse_button)
+        glfw.set_cursor_pos_callback(win, self._on_cursor_pos)
+        glfw.set_scroll_callback(win, self._on_scroll)
+        glfw.set_window_size_callback(win, self._on_window_size)
+        glfw.set_framebuffer_size_callback(win, self._on_framebuffer_size)
+        glfw.set_window_refresh_callback(win, self._on_refresh)
+        glfw.set_window_focus_callback(win, self._on_focus)
+        glfw.set_cursor_enter_callback(win, self._on_cursor_enter)
+
+    def _title(self, scene: Scene) -> str:
+        return f"glassray - {scene.name}"
+
+    # ------------------------------------------------------------ callbacks
+
+    def _ui_wants_mouse(self) -> bool:
+        return self._imgui_ready and self.imgui.get_io().want_capture_mouse
+
+    def _ui_wants_keys(self) -> bool:
+        return self._imgui_ready and self.imgui.get_io().want_text_input
+
+    def _on_key(self, win, key, scancode, action, mods):
+        self.ui_frames = max(self.ui_frames, 2)
+        if key == glfw.KEY_TAB:
+            # Tab is ours (show / hide the panel), never ImGui's: ImGui moves
+            # keyboard focus with it, and a Tab that reached a panel just
+            # opened (several pressed within a frame) put a text field in
+            # edit mode, which then took every key, Tab and 1..9 included
+            act = self.controls.key("tab") if action == glfw.PRESS else None
+            if act is not None:
+                self.actions.append(act)
+            return
+        backlog = self._imgui_backlog()      # ImGui's events not taken yet, before this one
+        if self._imgui_ready:
+            self.imgui.backends.glfw_key_callback(self._addr, key, scancode, action, mods)
+        name = _KEYS.get(key)
+        if action == glfw.RELEASE or name is None:
+            return
+        if backlog or self._deferred_keys:
+            # typed fast into a text field, a Return then P: the field was
+            # still active for ImGui (which had not taken the Return yet), so
+            # P was given to it as text, and dropped when it took the Return
+            event_id = self.imgui.get_current_context().input_events_next_event_id - 1
+            self._deferred_keys.append((event_id, name, mods, action))
+            return
+        if not self._ui_wants_keys():
+            self._shortcut(name, mods, action)
+
+    def _shortcut(self, name: str, mods: int, action: int) -> None:
+        if name in "123456789" and action == glfw.PRESS and self._quality_on():
+            self._quality_off("max error off: max depth set by key")
+        act = self.controls.key(name, shift=bool(mods & glfw.MOD_SHIFT), repeat=action == glfw.REPEAT)
+        if act is not None:
+            self.actions.append(act)
+
+    def _imgui_backlog(self) -> int:
+        """Input events ImGui has been given and not taken yet: with its
+        trickling queue it takes a key's down and up, and the text typed,
+        over several frames when they come faster than frames."""
+        if not self._imgui_ready:
+            return 0
+        return len(self.imgui.get_current_context().input_events_queue)
+
+    def _on_char(self, win, codepoint):
+        if self._imgui_ready:
+            self.imgui.backends.glfw_char_callback(self._addr, codepoint)
+        self.ui_frames = max(self.ui_frames, 2)
+
+    def _on_mouse_button(self, win, button, action, mods):
+        if self._imgui_ready:
+            self.imgui.backends.glfw_mouse_button_callback(self._addr, button, action, mods)
+        self.ui_frames = max(self.ui_frames, 2)
+        name = _BUTTONS.get(button)
+        if name is None:
+            return
+        # the position of the latest motion event (in event order: querying the
+        # pointer now could already see a later position)
+        x, y = self._cursor if self._cursor is not None else glfw.get_cursor_pos(win)
+        if action == glfw.PRESS:
+            if not self._ui_wants_mouse():
+                self.controls.press(name, x, y, shift=bool(mods & glfw.MOD_SHIFT))
+        elif action == glfw.RELEASE:
+            self.controls.release(name, x, y)
+
+    def _on_cursor_pos(self, win, x, y):
+        self._cursor = (x, y)
+        if self._imgui_ready:
+            self.imgui.backends.glfw_cursor_pos_callback(self._addr, x, y)
+            self.ui_frames = max(self.ui_frames, 2)
+        self.controls.move(x, y)
+
+    def _on_scroll(self, win, dx, dy):
+        if self._imgui_ready:
+            self.imgui.backends.glfw_scroll_callback(self._addr, dx, dy)
+        self.ui_frames = max(self.ui_frames, 2)
+        if not self._ui_wants_mouse():
+            self.controls.scroll(dx, dy)
+
+    def _on_window_size(self, win, w, h):
+        if w > 0 and h > 0:
+            self.controls.set_window_size(w, h)
+        self.needs_display = True
+
+    def _on_framebuffer_size(self, win, w, h):
+        self.needs_display = True
+
+    def _on_refresh(self, win):
+        self.needs_display = True
+
+    def _on_focus(self, win, focused):
+        if self._imgui_ready:
+            self.imgui.backends.glfw_window_focus_callback(self._addr, int(focused))
+        self.ui_frames = max(self.ui_frames, 1)
+
+    def _on_cursor_enter(self, win, entered):
+        if self._imgui_ready:
+            self.imgui.backends.glfw_cursor_enter_callback(self._addr, int(entered))
+        self.ui_frames = max(self.ui_frames, 1)
+
+    # ------------------------------------------------------------ loop
+
+    def run(self) -> int:
+        gl_start = rss_start = None
+        # the GL objects and memory are counted after the warm-up (caches
+        # filled) and at the end; a short soak (a smoke run) warms up for
+        # half its frames, so that both counts are taken and some frames
+        # lie between them
+        warm = min(max(50, self.soak // 5), self.soak // 2)
+        while not glfw.window_should_close(self.window):
+            self._wait()
+            interrupt.check()         # Ctrl-C in the terminal (deferred: viewer/interrupt.py)
+            if self.soak:
+                self._soak_step()
+                if self.frames == warm:
+                    # an adaptive render in flight holds a few GL objects of
+                    # its own: counted with none in flight, at both ends; and
+                    # its shader variants (cached per scene features) are
+                    # compiled by now, even those its first rounds have not
+                    # needed yet (with samples 1 it traces no pixel lists)
+                    self.prog.restart()
+                    self.prog.compile_adaptive()
+                    gl_start, rss_start = gl_object_counts(self.ctx, self.prog), _rss_kb()
+                    variants_start = len(self.renderer._subset_programs)
+                if self.frames >= self.soak:
+                    break
+            self._frame()
+        if self.soak:
+            self.prog.restart()
+            self.ctx.finish()
+            gl_end, rss_end = gl_object_counts(self.ctx, self.prog), _rss_kb()
+            variants_end = len(self.renderer._subset_programs)
+            moving = sorted(self._preview_frames)      # none in a soak of 11 frames or fewer
+            moving_ms = f"{moving[len(moving) // 2]:.1f}" if moving else "n/a"
+            print(f"soak: frames={self.frames} warmup={warm} rss_kb={rss_start}->{rss_end} "
+                  f"gl_objects={sum(gl_start.values())}->{sum(gl_end.values())} "
+                  f"culling_variants={variants_start}->{variants_end}/{self.renderer.SUBSET_PROGRAMS} "
+                  f"moving_frame_ms_median={moving_ms} "
+                  f"preview={self.prog.preview_size} detail={gl_start}->{gl_end}", flush=True)
+        return 0
+
+    def _busy(self) -> bool:
+        return bool((self.need_preview and self.controls.view == "image") or self.controls.changed or self.actions or self.ui_frames > 0
+                    or self.needs_display or self._want_window_shot or self.quality_job is not None
+                    or (self.controls.view != "image" and self.debug_dirty))
+
+    def _wait(self) -> None:
+        if self.soak:
+            glfw.poll_events()
+            return
+        fbw, fbh = glfw.get_framebuffer_size(self.window)
+        if fbw <= 0 or fbh <= 0:  # minimised: nothing to draw until it comes back
+            glfw.wait_events_timeout(IDLE_WAKE_S)
+            return
+        if self._busy():
+            glfw.poll_events()
+            return
+        if self._pending(fbw, fbh):
+            left = self.last_change + SETTLE_S - time.perf_counter()
+            if left > 0:
+                glfw.wait_events_timeout(left)
+            else:
+                glfw.poll_events()
+            return
+        if self.message and self.message_until > time.perf_counter():
+            # idle, but a HUD message is to disappear: wake up then
+            glfw.wait_events_timeout(self.message_until - time.perf_counter() + 0.01)
+            if time.perf_counter() >= self.message_until:
+                self.message = ""
+                self.needs_display = True
+            return
+        # idle: all samples done, nothing changed.  Sleep until an event (the
+        # timeout only lets Python see a Ctrl-C now and then).
+        glfw.wait_events_timeout(IDLE_WAKE_S)
+
+    def _pending(self, fbw: int, fbh: int) -> bool:
+        """Work left once the view is still: samples to accumulate, or the
+        debug view at full resolution."""
+        if self.controls.view == "image":
+            return not self.prog.done
+        return self.debug_dirty or self.debug_res != (fbw, fbh)
+
+    def _warn_one_draw(self) -> None:
+        """Say (stderr and HUD) where the scene's trees may be more than the
+        one draw a sample the viewer gives them (Renderer.one_draw_warning):
+        at the start, and again whenever a change of settings makes it so."""
+        warning = self.renderer.one_draw_warning("the viewer")
+        if warning and warning != self._one_draw_warned:
+            print(warning, file=sys.stderr, flush=True)
+            self._say("trees this deep may be cut short here; 'glassray render' traces them whole")
+        self._one_draw_warned = warning
+
+    def _say(self, text: str, error: bool = False) -> None:
+        self.message = text
+        self.message_until = time.perf_counter() + MESSAGE_S
+        if error:
+            print(f"glassray: {text}", file=sys.stderr, flush=True)
+
+    def _frame(self) -> None:
+        t0 = time.perf_counter()
+        win = self.window
+        fbw, fbh = glfw.get_framebuffer_size(win)
+        if fbw <= 0 or fbh <= 0:  # minimised: only quitting makes sense
+            if "quit" in self.actions:
+                glfw.set_window_should_close(win, True)
+            self.needs_display = False
+            self.ui_frames = 0
+            self.actions.clear()
+            return
+        if (fbw, fbh) != self.prog.size:
+            self.prog.resize(fbw, fbh)
+            self.need_preview = True
+            self.last_change = t0
+
+        actions, self.actions = self.actions, []
+        want_shot = 0  # P presses in this frame: one file each (three quick presses made two)
+        for act in actions:
+            if act == "quit":
+                glfw.set_window_should_close(win, True)
+            elif act == "toggle_panel":
+                if self.panel is not None:
+                    self.show_panel = not self.show_panel
+                else:
+                    self._say(f"no settings panel: imgui-bundle is not available ({IMGUI_ERROR})", error=True)
+            elif act == "help":
+                self.show_help = not self.show_help
+                if self.imgui is None and self.show_help:
+                    print(help_text(), flush=True)
+            elif act == "reload":
+                self.reload()
+            elif act == "screenshot":
+                want_shot += 1
+            elif act == "view":
+                self._view_changed()
+            elif act == "screenshot_window":
+                # ImGui shows a window that just opened one frame later: let the
+                # overlays settle for a frame, then read the window back
+                self._want_window_shot = 2
+                self._window_shots += 1
+        if self.controls.message:
+            self._say(self.controls.message)
+            self.controls.message = ""
+
+        ui = self._imgui_ready
+        if ui:
+            imgui = self.imgui
+            imgui.backends.opengl3_new_frame()
+            imgui.backends.glfw_new_frame()
+            imgui.new_frame()
+            if self._deferred_keys:
+                # the keys this new_frame took: want_text_input, which it has
+                # just set from the last frame's widgets, says whether a text
+                # field had the keyboard when ImGui took each (trickling, it
+                # takes a key's press and the text typed in different frames)
+                ctx = imgui.get_current_context()
+                queue = ctx.input_events_queue
+                left = queue[0].event_id if len(queue) else ctx.input_events_next_event_id
+                taken = [k for k in self._deferred_keys if k[0] < left]
+                self._deferred_keys = [k for k in self._deferred_keys if k[0] >= left]
+                for _, name, mods, action in taken:
+                    if not self._ui_wants_keys():
+                        self._shortcut(name, mods, action)
+            if self.show_panel:
+                ds = imgui.get_io().display_size
+                self.panel.view = self.controls.view
+                self.panel.quality_status = self.quality_status
+                res = self.panel.draw(self.scene, (ds.x, ds.y))
+                if res.view_changed:
+                    self.controls.set_view(self.panel.view)
+                    self._view_changed()
+                if res.quality_changed or res.remeasure:
+                    self._quality_update(remeasure=res.remeasure)
+                if res.camera_changed:
+                    self.controls.camera_edited()
+                if res.changed:
+                    self.controls.changed = True
+                if res.target_ms_changed:
+                    self.prog.target_ms = self.panel.target_ms
+                if res.adaptive_changed:
+                    self._set_adaptive(self.panel.adaptive)
+
+        if self.controls.take_changed():
+            self._apply_scene()
+            self.need_preview = True
+            self.debug_dirty = True
+            self.last_change = t0
+
+        if self.quality_job is not None:
+            self._quality_step()
+
+        # trace: a preview right after a change, full-resolution bands once still
+        # (a debug view instead: its picture, reduced while things move)
+        traced = previewed = False
+        image_view = self.controls.view == "image"
+        if not image_view:
+            show_trace = self._debug_frame(t0, fbw, fbh)
+        elif self.need_preview:
+            self.prog.render_preview(max(5.0, self.prog.target_ms - self.overhead_ms))
+            self.need_preview = False
+            traced = previewed = True
+            show_trace = True
+        elif not self.prog.done and (self.soak or t0 - self.last_change >= SETTLE_S) and self.quality_job is None:
+            landed = (self.prog.passes_done, self.prog.uploads)
+            try:
+                self.prog.accumulate(self.prog.target_ms)
+            except Exception as e:  # an adaptive shader variant that does not compile
+                if not self.prog.adaptive:
+                    raise
+                self._set_adaptive(False)
+                self._error(f"adaptive accumulation failed, accumulating uniformly: {e}")
+            traced = True
+            # progress is shown a few times a second (the display pass and the
+            # buffer swap are not free on a software renderer), and at once
+            # when a sample completes (adaptive: when new sums land)
+            show_trace = ((self.prog.passes_done, self.prog.uploads) != landed or self.soak
+                          or t0 - self._last_display >= ACCUMULATE_DISPLAY_S)
+        else:
+            show_trace = False
+        trace_ms = self.prog.last_trace_ms if traced else 0.0
+
+        for _ in range(want_shot):
+            self.screenshot()
+
+        draw = show_trace or self.needs_display or self.ui_frames > 0 or self._want_window_shot
+        if draw:
+            if image_view or self.debug_fbo is None:
+                self.prog.display(self.ctx.screen, (0, 0, fbw, fbh))
+            else:
+                self.ctx.copy_framebuffer(self.ctx.screen, self.debug_fbo)
+                # copy_framebuffer leaves the last framebuffer used bound (the
+                # renderer's target, where the view was traced): the overlays
+                # below must go to the window
+                self.ctx.screen.use()
+        if ui:
+            if draw:
+                self._draw_overlays()
+            imgui.render()
+            if draw:
+                imgui.backends.opengl3_render_draw_data(imgui.get_draw_data())
+        elif draw and (t0 - self._title_t > 0.25 or not self._pending(fbw, fbh)):
+            glfw.set_window_title(win, self._title(self.scene) + "  |  " + "  |  ".join(self._hud_lines()))
+            self._title_t = t0
+        if self._want_window_shot and draw:
+            self._want_window_shot -= 1
+            if self._want_window_shot == 0:
+                shots, self._window_shots = max(1, self._window_shots), 0
+                for _ in range(shots):
+                    self._window_screenshot(fbw, fbh)
+        if draw:
+            glfw.swap_buffers(win)
+            self.frames += 1
+            self._last_display = time.perf_counter()
+        self.needs_display = False
+        self.ui_frames = max(0, self.ui_frames - 1)
+        if ui and (self._deferred_keys or self._imgui_backlog()):
+            # ImGui takes fast input over several frames: draw until it has
+            # all of it (it waited for the next mouse move), then the keys
+            self.ui_frames = max(self.ui_frames, 1)
+
+        t1 = time.perf_counter()
+        if draw:
+            self.frame_ms = (t1 - t0) * 1000.0
+            if self.soak and previewed and self.frames > 10:
+                self._preview_frames.append(self.frame_ms)
+            if traced:
+                self.overhead_ms = 0.8 * self.overhead_ms + 0.2 * max(0.0, self.frame_ms - trace_ms)
+            self._fps_count += 1
+            if t1 - self._fps_t0 >= 0.5:
+                self.fps = self._fps_count / (t1 - self._fps_t0)
+                self._fps_count, self._fps_t0 = 0, t1
+
+    def _hud_lines(self) -> list[str]:
+        q = [self.quality_status] if self._quality_on() and self.quality_status else []
+        if self.controls.view != "image":
+            rw, rh = self.debug_res or self.prog.size
+            return [f"{self.frame_ms:.1f} ms  {self.fps:.0f} fps",
+                    f"view: {VIEW_NAMES.get(self.controls.view, self.controls.view)}  (V: next)",
+                    f"{rw}x{rh}" + (" (preview)" if (rw, rh) != self.prog.size else ""),
+                    f"max depth {self.scene.render.max_depth}", *q]
+        rw, rh = self.prog.active_resolution
+        preview = (rw, rh) != self.prog.size
+        total = self.prog.samples
+        if self.prog.adaptive:
+            samples = (f"samples {self.prog.mean_spp:.1f}/{total} mean per pixel (adaptive)"
+                       + ("" if self.prog.done else " ..."))
+        else:
+            done = self.prog.passes_done
+            samples = f"samples {done}/{total}" + ("" if done >= total else " ...")
+        # once every sample is in, the viewer draws nothing more: a rate of
+        # frames would stay on screen, stale (it read 22 fps long after)
+        timing = (f"idle (last frame {self.frame_ms:.1f} ms)" if self.prog.done and not preview
+                  else f"{self.frame_ms:.1f} ms  {self.fps:.0f} fps")
+        return [timing,
+                f"{rw}x{rh}" + (" (preview)" if preview else ""),
+                samples,
+                f"max depth {self.scene.render.max_depth}", *q]
+
+    def _draw_overlays(self) -> None:
+        from .panel import draw_help, draw_hud
+
+        msg = self.message if time.perf_counter() < self.message_until else ""
+        lines = self._hud_lines()
+        if not self.show_panel:
+            lines.append("Tab: settings  H: help")
+        draw_hud(lines, msg)
+        # an auto-sized ImGui window takes its new size one frame late: draw
+        # again when the overlays' layout changes
+        layout = (len(lines), msg, self.show_help, self.show_panel)
+        if layout != self._overlay_layout:
+            self._overlay_layout = layout
+            self.ui_frames = max(self.ui_frames, 2)
+        if self.show_help:
+            ds = self.imgui.get_io().display_size
+            self.show_help = draw_help((ds.x, ds.y))
+
+    # ------------------------------------------------------------ debug views (V)
+
+    def _view_changed(self) -> None:
+        self.debug_dirty = True
+        self.needs_display = True
+        if self.controls.view == "image":
+            self.need_preview = not self.prog.started
+        self._say(f"view: {self.controls.view}")
+
+    def _debug_frame(self, t0: float, fbw: int, fbh: int, force_full: bool = False) -> bool:
+        """Compute the debug view's picture when it is out of date: at a
+        reduced resolution while things move, at full resolution once still.
+        True when a new picture is ready."""
+        settled = force_full or bool(self.soak) or t0 - self.last_change >= SETTLE_S
+        if not self.debug_dirty and (self.debug_res == (fbw, fbh) or not settled):
+            return False
+        if settled:
+            size = (fbw, fbh)
+        else:
+            sc = self.prog.preview_scale(max(5.0, self.prog.target_ms - self.overhead_ms))
+            size = (max(1, round(fbw * sc)), max(1, round(fbh * sc)))
+        from ..base.views import raw_view
+
+        raw = raw_view(self.renderer, self.controls.view, *size)   # into the renderer's kept target
+        pic = window_picture(self.controls.view, raw, fbw, fbh)
+        if self.debug_tex is None or self.debug_tex.size != (fbw, fbh):
+            self._release_debug()
+            self.debug_tex = self.ctx.texture((fbw, fbh), 3, alignment=1)
+            self.debug_fbo = self.ctx.framebuffer(color_attachments=[self.debug_tex])
+        self.debug_tex.write(np.ascontiguousarray(pic[::-1]).tobytes(), alignment=1)
+        self.debug_pic = pic
+        self.debug_res = size
+        self.debug_dirty = False
+        return True
+
+    def _release_debug(self) -> None:
+        for obj in (self.debug_fbo, self.debug_tex):
+            if obj is not None:
+                obj.release()
+        self.debug_fbo = self.debug_tex = None
+        self.debug_res = None
+        self.debug_dirty = True
+
+    # ------------------------------------------------------------ max error (viewer.quality)
+
+    def _quality_on(self) -> bool:
+        return self.panel is not None and self.panel.max_error_on
+
+    def _quality_update(self, remeasure: bool = False) -> None:
+        """The panel's "max error" changed: switched on (measure unless
+        cached, then apply the pick), off (restore the settings), a new
+        budget (pick again from the measurements), or "measure again"."""
+        from ..measure import quality
+
+        if not self._quality_on():
+            self._quality_off("")
+            return
+        switched_on = self.quality_saved is None
+        if switched_on:
+            r = self.scene.render
+            self.quality_saved = self.panel.user_render = (r.samples, r.max_depth, r.min_weight)
+        elif self.quality_job is not None and not remeasure:
+            return  # measuring: the pick uses the new budget when it is done
+        elif self.quality_parts is not None and not remeasure:
+            # another budget: pick again from the same measurements, if they
+            # are this view's (the key holds the camera, the lights and the
+            # window's size); else this view's, from the cache where it was
+            # measured before
+            fbw, fbh = glfw.get_framebuffer_size(self.window)
+            key = quality.make_key(self.ctx, self.scene, quality.layout(max(1, fbw), max(1, fbh)))
+            if key.stem() == self.quality_parts[1].key.stem():
+                self._quality_finish()
+                return
+        if self.quality_job is not None:
+            self.quality_job.close()
+            self.quality_job = None
+        fbw, fbh = glfw.get_framebuffer_size(self.window)
+        scene = copy.deepcopy(self.scene)
+        if remeasure and self.quality_parts is not None:  # measure again: not from the cache
+            meas, cache, cands = quality.prepare(self.ctx, scene, max(1, fbw), max(1, fbh))
+            meas = quality.Measurement(self.ctx, scene, meas.layout, cands)
+        else:
+            meas, cache, cands = quality.prepare(self.ctx, scene, max(1, fbw), max(1, fbh))
+        self.quality_parts = (meas, cache, cands)
+        self.quality_job = None if meas.done else meas
+        if meas.done:
+            self._quality_finish()
+        else:
+            self.quality_status = f"max error {self.panel.max_error:.4g}: measuring\u2026 0%"
+            self._say("max error: measuring (once per scene and window size)")
+
+    def _quality_step(self) -> None:
+        job = self.quality_job
+        try:
+            done = job.step(QUALITY_STEP_S)
+        except Exception as e:
+            self.quality_job = self.quality_parts = None
+            self._quality_off("")
+            self._error(f"max error: measuring failed: {e}")
+            return
+        self.ui_frames = max(self.ui_frames, 1)
+        if done:
+            self.quality_job = None
+            self._quality_finish()
+        else:
+            self.quality_status = (f"max error {self.panel.max_error:.4g}: measuring\u2026 "
+                                   f"{100 * job.fraction:.0f}%")
+
+    def _quality_finish(self) -> None:
+        from ..measure import quality
+
+        meas, cache, cands = self.quality_parts
+        choice = quality.finish(meas, cache, cands, self.panel.max_error)
+        self.quality_choice = choice
+        c = choice.measured.candidate
+        r = self.scene.render
+        if (r.samples, r.max_depth, r.min_weight) != (c.samples, c.max_depth, c.min_weight):
+            r.samples, r.max_depth, r.min_weight = c.samples, c.max_depth, c.min_weight
+            self.controls.changed = True
+        self.quality_status = (f"max error {choice.max_error:.4g}: " + ("" if choice.met else "not reached, ")
+                               + f"{c.samples} spp, depth {c.max_depth}, w {c.min_weight:g} "
+                               f"(RMSE {choice.measured.rmse:.3g}"
+                               + (f" +- {choice.measured.rmse_se:.2g})" if choice.measured.rmse_se > 0 else ")")
+                               + (f"; {choice.cut_pixels} pixels left out: trees cut by the driver"
+                                  if choice.cut_pixels else ""))
+        self._say(self.quality_status)
+        # on stderr once per pick, not at every step of the budget's slider
+        said = (id(meas), c.key(), choice.met)
+        if said != self.quality_said:
+            self.quality_said = said
+            print(f"glassray: {choice.line()}", file=sys.stderr, flush=True)
+
+    def _quality_off(self, message: str) -> None:
+        if self.quality_job is not None:
+            self.quality_job.close()
+            self.quality_job = None
+        if self.panel is not None:
+            self.panel.max_error_on = False
+        if self.quality_saved is not None:
+            r = self.scene.render
+            r.samples, r.max_depth, r.min_weight = self.quality_saved
+            self.quality_saved = None
+            if self.panel is not None:
+                self.panel.user_render = None
+            self.controls.changed = True
+        self.quality_status = ""
+        if message:
+            self._say(message)
+
+    # ------------------------------------------------------------ scene changes
+
+    def _apply_scene(self) -> None:
+        try:
+            self.renderer.set_scene(self.scene)
+            self.good_scene = copy.deepcopy(self.scene)
+        except Exception as e:  # ShaderError, a scene the packer rejects
+            if self.debug:
+                import traceback
+
+                traceback.print_exc()
+            self._error(f"change not applied: {e}")
+            for f in fields(Scene):
+                setattr(self.scene, f.name, copy.deepcopy(getattr(self.good_scene, f.name)))
+            self.controls.camera_edited()
+            self.controls.changed = False
+            self.renderer.set_scene(self.scene)
+        self._warn_one_draw()
+        self.prog.restart()
+
+    def _set_adaptive(self, on: bool) -> None:
+        """Adaptive or uniform accumulation (the panel's "adaptive"): starts over."""
+        if self.prog.adaptive != bool(on):
+            self.prog.adaptive = on
+            self.needs_display = True
+        if self.panel is not None:
+            self.panel.adaptive = self.prog.adaptive
+
+    def _error(self, text: str) -> None:
+        self._say(text.splitlines()[0] if text else text, error=False)
+        print(f"glassray: {text}", file=sys.stderr, flush=True)
+        if self.panel is not None:
+            self.panel.error = text
+
+    def reload(self) -> None:
+        """F5: the scene file (overrides applied again) and the shaders from
+        disk; on an error the last good ones keep running."""
+        try:
+            fresh = self.loader(self.args)
+        except SceneError as e:
+            self._error(f"reload failed, keeping the last good scene: {e}")
+            return
+        merged = merge_reloaded(self.file_scene, fresh, self.scene)
+        try:
+            renderer = Renderer(self.ctx, merged)  # compiles trace.frag from disk
+        except Exception as e:
+            # the shaders or the new scene's shader (a driver may reject it):
+            # both stay as they were
+            self._error(f"reload failed, keeping the last good scene and shaders: {e}")
+            return
+        try:
+            self.prog.reload_program()
+        except Exception as e:
+            renderer.release()
+            self._error(f"reload failed, keeping the last good shaders: {e}")
+            return
+        self.renderer.release()
+        self.renderer = renderer
+        self.prog.set_renderer(renderer)
+        self.scene = merged
+        self.file_scene = copy.deepcopy(fresh)
+        self.good_scene = copy.deepcopy(merged)
+        self._warn_one_draw()
+        self.controls.rebase(merged, start=fresh)
+        if self.panel is not None:
+            self.panel.error = ""
+        glfw.set_window_title(self.window, self._title(merged))
+        self.debug_dirty = True
+        if self._quality_on():
+            # the reloaded scene and shaders: measured unless the cache has
+            # them (its key holds both, so an unchanged file is a hit)
+            if self.quality_job is not None:
+                self.quality_job.close()
+            self.quality_job = self.quality_parts = None
+            self._quality_update()
+        self.need_preview = True
+        self.last_change = time.perf_counter()
+        self._say("reloaded scene and shaders")
+        print("reloaded", flush=True)
+
+    # ------------------------------------------------------------ screenshots
+
+    def screenshot(self) -> None:
+        """P: the accumulated image (at least one full sample), no HUD or panel;
+        in a debug view its picture at full resolution."""
+        if self.controls.view != "image":
+            fbw, fbh = glfw.get_framebuffer_size(self.window)
+            if self.debug_res != (fbw, fbh) or self.debug_dirty:
+                self._debug_frame(time.perf_counter(), fbw, fbh, force_full=True)
+            self._save_screenshot(save_rgb8, self.debug_pic)
+            return
+        self.prog.finish_pass()
+        self._save_screenshot(save_linear, self.prog.image())
+
+    def _save_screenshot(self, save, pixels) -> None:
+        """Save under the next free name in the current folder; the path on
+        stdout, or what went wrong, and in which folder, on stderr and the HUD."""
+        try:
+            path = save(pixels)
+        except OSError as e:
+            try:
+                folder = os.getcwd()
+            except OSError:             # the folder the viewer runs in was removed
+                folder = "the current folder, which no longer exists"
+            self._say(f"screenshot not saved in {folder}: {e.strerror or e}", error=True)
+            return
+        print(os.path.abspath(path), flush=True)
+        self._say(f"saved {path.name}")
+
+    def _window_screenshot(self, fbw: int, fbh: int) -> None:
+        raw = self.ctx.screen.read(viewport=(0, 0, fbw, fbh), components=3, alignment=1)
+        rgb = np.frombuffer(raw, dtype=np.uint8).reshape(fbh, fbw, 3)[::-1]
+        self._save_screenshot(save_rgb8, rgb)
+
+    # ------------------------------------------------------------ soak (debug)
+
+    def _soak_step(self) -> None:
+        """Programmatic input for ``--soak N``: the camera orbits and zooms,
+        the light moves, the panel opens and closes, the window changes size,
+        and every few frames the view stays still so that samples accumulate."""
+        n = self.frames
+        c = self.controls
+        if n == 0:
+            self._soak_depth = min(9, self.scene.render.max_depth)
+        phase = n % 40
+        if phase < 30:
+            c.orbit_pixels(3.0, 2.0 * math.sin(n * 0.05))
+            if n % 7 == 0:
+                c.key("d" if (n // 70) % 2 == 0 else "a", shift=n % 14 == 0)
+            if n % 11 == 0:
+                c.scroll(0.0, 0.5 if (n // 110) % 2 == 0 else -0.5)
+            if n % 97 == 0:  # two depths, both compiled during the warm-up
+                c.key("3" if (n // 97) % 2 == 0 else str(self._soak_depth))
+        if n % 150 == 0 and self.panel is not None:
+            self.show_panel = not self.show_panel
+            self.panel.open_all = True  # every widget of the panel drawn
+        if n % 60 == 30:
+            self.show_help = not self.show_help
+        if n == 60 and self.panel is not None:  # "max error": measured in steps, then applied
+            self.panel.max_error_on = True
+            self._quality_update()
+        if n % 170 == 85:  # the debug views too (their textures must not pile up)
+            c.key("v")
+            self._view_changed()
+        if n % 250 == 125:
+            w, h = self.args.size
+            k = (n // 250) % 3
+            glfw.set_window_size(self.window, max(1, w + 16 * k), max(1, h + 8 * k))
+        self.ui_frames = max(self.ui_frames, 1)
+
+    # ------------------------------------------------------------ shutdown
+
+    def close(self) -> None:
+        if self._imgui_ready:
+            try:
+                self.imgui.backends.opengl3_shutdown()
+                self.imgui.backends.glfw_shutdown()
+                self.imgui.destroy_context()
+            except Exception:
+                pass
+            self._imgui_ready = False
+        if self.quality_job is not None:
+            try:
+                self.quality_job.close()
+            except Exception:
+                pass
+            self.quality_job = None
+        self._release_debug()
+        for obj in (self.prog, self.renderer):
+            if obj is not None:
+                try:
+                    obj.release()
+                except Exception:
+                    pass
+        self.prog = self.renderer = None
+        if self.ctx is not None:
+            try:
+                self.ctx.release()
+            except Exception:
+                pass
+            self.ctx = None
+        if self.window is not None:
+            glfw.destroy_window(self.window)
+            self.window = None
+        glfw.terminate()
+
+
+def help_text() -> str:
+    width = max(len(k) for k, _ in HELP_ALL)
+    return "\n".join(f"  {k:<{width}}  {v.replace('`', '')}" for k, v in HELP_ALL)
+
+
+def window_picture(view: str, raw: np.ndarray, width: int, height: int) -> np.ndarray:
+    """The window's picture of a debug view: uint8 (height, width, 3).  ``raw``
+    (viewer.views.raw_view, possibly smaller: scaled up to the window,
+    nearest pixel) coloured as ``glassray render --view`` does
+    (viewer.views.picture); a legend strip (depth, cost) replaces the
+    picture's bottom rows, so that the view keeps the image's framing."""
+    from ..base.views import picture
+
+    h, w = raw.shape[:2]
+    if (w, h) != (width, height):
+        ys = np.arange(height) * h // height
+        xs = np.arange(width) * w // width
+        raw = raw[ys][:, xs]
+    pic = picture(view, raw)
+    if pic.shape[0] > height:
+        legend = pic[height:]
+        pic = (np.concatenate([pic[:height - legend.shape[0]], legend]) if height >= 2 * legend.shape[0]
+               else pic[:height])
+    return np.round(255 * pic).astype(np.uint8)
+
+
+_GL_IS = (("buffers", "glIsBuffer"), ("textures", "glIsTexture"), ("framebuffers", "glIsFramebuffer"),
+          ("vertex_arrays", "glIsVertexArray"), ("programs", "glIsProgram"), ("shaders", "glIsShader"),
+          ("renderbuffers", "glIsRenderbuffer"), ("samplers", "glIsSampler"), ("queries", "glIsQuery"))
+
+
+def gl_object_counts(ctx: moderngl.Context, prog: Progressive) -> dict[str, int]:
+    """How many GL objects of each kind exist in the current context
+    (glIs* over every name up to a little past the newest one).  For the
+    soak test: the counts must stay flat."""
+    proto = ctypes.CFUNCTYPE(ctypes.c_ubyte, ctypes.c_uint)
+    probes = [ctx.buffer(reserve=4), ctx.texture((1, 1), 4)]
+    probes.append(ctx.framebuffer(color_attachments=[probes[1]]))
+    probes.append(ctx.vertex_array(prog.program, []))
+    upper = max(p.glo for p in probes) + 256
+    upper = max(upper, prog.program.glo + 256)
+    counts = {}
+    try:
+        for kind, fname in _GL_IS:
+            addr = glfw.get_proc_address(fname)
+            if not addr:
+                continue
+            fn = proto(addr)
+            counts[kind] = sum(1 for name in range(1, upper) if fn(name))
+    finally:
+        for p in reversed(probes):
+            p.release()
+    for kind in ("buffers", "textures", "framebuffers", "vertex_arrays"):  # less the probes
+        if kind in counts:
+            counts[kind] -= 1
+    return counts
