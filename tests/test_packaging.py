@@ -81,12 +81,12 @@ def test_installed_wheel_renders_what_the_sources_render(wheel_site, tmp_path, g
     script = f"""
 import sys
 sys.path.insert(0, {str(site)!r})
-import viewer, viewer.shaders as sh, viewer.scene as sc
+import viewer, viewer.gpu.shaders as sh, viewer.scene.load as sc
 from pathlib import Path
 site = Path({str(site)!r}).resolve()
 assert Path(viewer.__file__).resolve().is_relative_to(site), viewer.__file__
 root = sh.shader_root().resolve()
-assert root.is_relative_to(site) and (root / "trace.frag").is_file(), root
+assert root.is_relative_to(site) and (root / "render.frag").is_file(), root
 print(" ".join(sc.builtin_scene_names()))
 from viewer import cli
 sys.exit(cli.main(["render", "default", "-o", {str(out)!r}, "--size", "40x24", "--samples", "1"]))

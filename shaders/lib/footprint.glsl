@@ -1,10 +1,10 @@
-// Footprint samples (viewer/adaptive.py): the checker of a plane
+// Footprint samples (viewer/adaptive/): the checker of a plane
 // box-filtered over a pixel's square, exactly, instead of point-sampled.
 // Adaptive renders take them, and so do uniform renders of more than one
 // sample (Renderer.render, the viewer's accumulation), with direct
 // footprints only (exact shares: the same limit as point samples); their
 // mask comes from AdaptiveSampler.direct_footprints, the shares from its
-// share pass (FOOTPRINT_SHARE_PASS in trace.frag), and every sample reads
+// share pass (footprint_shares.frag), and every sample reads
 // them (FOOTPRINT_SHARES).
 //
 // Texel (i, H - 1 - j) of footprintMask (RG32F) holds in r k + 1 where the
@@ -12,7 +12,7 @@
 // where the pixel has chain footprint e (below), 0 for point samples; in g
 // the pixel's share (pixelCoverage) as the first pass found it, -1 where
 // the closed form is out of reach or before the first pass.  The first
-// pass computes the shares and reports them (trace.frag); the list passes
+// pass computes the shares and reports them (footprint_shares.frag); the list passes
 // (FOOTPRINT_SHARES) read them from g.
 // The directions that meet a plane form a convex set, so every ray through
 // the pixel's square meets plane k, unless another object pokes in between
@@ -49,7 +49,7 @@
 // the reflected one at total internal reflection) through the same
 // surfaces to one checkered plane, the map from the pixel's square to the
 // plane is taken as the homography through the four corners' points
-// (viewer/adaptive.py's chain_footprints, which also rejects pixels where
+// (viewer/adaptive/'s chain_footprints, which also rejects pixels where
 // the corner grid bends more than CHAIN_TOLERANCE allows).  A sample whose
 // own principal chain matches (and ends on that plane) takes the shares;
 // any other takes a point sample (see takesFootprint).
@@ -71,7 +71,7 @@ uniform sampler2D footprintMask;
 // Chain footprint e at texels (3 (e % chainEntriesPerRow) + r, e /
 // chainEntriesPerRow), r = 0, 1, 2: (fpX, chain id), (fpZ, k + 1), (fpW,
 // tolerance^2; not read here: the tolerance is applied per pixel, in
-// viewer/adaptive.py).
+// viewer/adaptive/).
 uniform sampler2D footprintChain;
 uniform int chainEntriesPerRow;
 int footprintObject = -1;     // k, or -1: this pixel takes point samples
@@ -84,10 +84,10 @@ vec3 fpCentreDir;             // the camera ray through the pixel's centre (the 
 
 // More products of crossing lines than MAX_PIXEL_CORNERS (checker corners
 // inside the pixel), or more lines than MAX_PIXEL_LINES: no closed form;
-// the sample's row is integrated.  Both come from viewer/adaptive.py (the
+// the sample's row is integrated.  Both come from viewer/adaptive/ (the
 // footprint variants' defines), where the reasons for their values are.
 #if !defined(MAX_PIXEL_CORNERS) || !defined(MAX_PIXEL_LINES)
-#error "FOOTPRINT_AA needs MAX_PIXEL_CORNERS and MAX_PIXEL_LINES (viewer/adaptive.py)"
+#error "FOOTPRINT_AA needs MAX_PIXEL_CORNERS and MAX_PIXEL_LINES (viewer/adaptive/)"
 #endif
 // More lines than this along one row: a point sample (a checker that fine
 // is where the plane meets the horizon).
@@ -295,7 +295,7 @@ vec2 fpPixel;
 #endif
 
 void setFootprintPixel(vec2 ij) {
-    // cameraRay(ij, vec2(0.5)) (trace.frag): the centre sample's own ray
+    // cameraRay(ij, vec2(0.5)) (lib/camera.glsl): the centre sample's own ray
     vec2 uvC = (ij + vec2(0.5)) / imageSize;
     fpCentreDir = normalize(camForward + (2.0 * uvC.x - 1.0) * camRight + (1.0 - 2.0 * uvC.y) * camUp);
     int row = int(imageSize.y - 1.0 - ij.y);

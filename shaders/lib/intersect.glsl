@@ -33,7 +33,7 @@ float hitPlane(float height, vec3 ro, vec3 rd, float tmin, float tmax, out vec3 
 #endif
 
 #ifdef NAIVE_INTERSECT
-// NAIVE_INTERSECT (measurements only, see viewer/stress.py): the textbook
+// NAIVE_INTERSECT (measurements only, see viewer/measure/stress.py): the textbook
 // quadratic t^2 + b t + c = 0, discriminant b^2 - 4c and roots (-b +- sqrt)/2,
 // which cancel catastrophically for distant or grazing rays.
 float hitSphere(vec3 center, float radius, vec3 ro, vec3 rd, float tmin, float tmax, out vec3 n) {
@@ -265,7 +265,7 @@ bool mayHitBound(vec4 bound, vec3 ro, vec3 rd, float tmin, float tmax) {
 
 // Shapes: the object types, plus SHAPE_VESSEL for a cylinder with a wall.
 // The specialised shader passes each object's shape as a literal (see
-// FOR_EACH_OBJECT in trace.frag), so only that primitive's code is compiled
+// FOR_EACH_OBJECT in lib/walk.glsl), so only that primitive's code is compiled
 // for it; the generic one passes the shape read from the block at run time.
 #define SHAPE_VESSEL 4
 

@@ -1,16 +1,16 @@
 // The scene as the GPU sees it.  Mirrored on the Python side by the numpy
-// dtypes in viewer/gpu_scene.py: every member is vec4/ivec4 sized so std140
+// dtypes in viewer/gpu/packing.py: every member is vec4/ivec4 sized so std140
 // never inserts padding.  All positions are camera-relative (the eye is at
 // the origin; the shift is done in float64 on the CPU).
 //
-// Compile-time constants injected by viewer/gpu_scene.py (shader_defines):
+// Compile-time constants injected by viewer/gpu/packing.py (shader_defines):
 //   NUM_OBJECTS, NUM_LIGHTS, NUM_TRANSPARENT (counts, may be 0)
 //   OBJECTS_LEN, MATERIALS_LEN, LIGHTS_LEN, MEDIA_LEN (array sizes, >= 1)
 //   STACK_SIZE (ray-tree stack: max_depth + 1 entries suffice for a
 //   depth-first walk that pushes at most one child per node: it holds
 //   branches of strictly increasing depth, at most max_depth - 1); with
 //   HAS_DIELECTRIC only, and rounded up to 9, 17, 33 or 65 so that a new
-//   max depth (a uniform) rarely compiles (gpu_scene.stack_size)
+//   max depth (a uniform) rarely compiles (gpu/packing.py stack_size)
 //   HAS_PLANE/SPHERE/BOX/CYLINDER, HAS_LIGHTS, HAS_DIELECTRIC,
 //   HAS_REFLECTION, HAS_SKY_IMAGE: the features the scene uses; code for
 //   the others is not compiled.
@@ -50,7 +50,7 @@ struct Material {
 
 // A transparent slot: its object and material, and the material's optics
 // again, so that a medium's ior, transparency and absorption are read at
-// the slot's own index (trace.frag's mediumOptics).
+// the slot's own index (lib/walk.glsl mediumOptics).
 struct Medium {
     ivec4 index;        // x: object index, y: material index
     vec4 optics;        // x: ior, y: transparency

@@ -53,7 +53,7 @@ def captured_programs(ctx, name: str) -> dict[str, tuple[str, str]]:
     compiles at a small size: renders of 1 and 4 samples, an adaptive
     render, the first-hit and cost views, the resumable passes (scenes with
     glass) and the generic shader's renders of 1 and 4 samples."""
-    from viewer.adaptive.sampler import render_adaptive
+    from viewer.adaptive.render import render_adaptive
     from viewer.gpu.renderer import Renderer
     from viewer.scene.load import load_scene
 
@@ -133,7 +133,8 @@ BOUNDED_WHILE = {
     # the ray tree's walk: every step goes one level down (depth <= max_depth,
     # an integer, validated <= 64) or pops the stack (an integer); in RESUME
     # passes also resumeBudget nodes at most
-    ("trace.frag", "walking"),
+    ("lib/tree.glsl", "walking"),
+    ("lib/resume.glsl", "walking"),
 }
 
 _FOR = re.compile(r"\bfor\s*\(([^;]*);([^;]*);([^)]*)\)")

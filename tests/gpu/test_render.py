@@ -270,7 +270,7 @@ def test_a_renderer_builds_its_later_variants_from_the_shaders_it_started_with(g
     r = Renderer(gl, load_scene("default"))
     try:
         good = r.render(64, 36, 1)
-        trace = shaders / "trace.frag"
+        trace = shaders / "render.frag"
         trace.write_text(trace.read_text().replace("void main() {", "void main() { this_is_an_error;"))
         (shaders / "lib" / "optics.glsl").unlink()
         before = r.programs_built
@@ -288,7 +288,7 @@ def test_a_renderer_builds_its_later_variants_from_the_shaders_it_started_with(g
 
 def test_a_medium_s_optics_edited_in_place_take_effect_without_a_compile(gl):
     # The block carries each transparent slot's ior, transparency and
-    # absorption beside its material (gpu_scene.MEDIUM_DTYPE): an edit of
+    # absorption beside its material (gpu/block.py MEDIUM_DTYPE): an edit of
     # those values (the panel's set_scene) must reach every copy, with no
     # new program, and give the image a new renderer of the edited scene gives.
     import copy

@@ -331,7 +331,7 @@ def test_viewer_session(xdisplay, tmp_path, gl):
         assert_same_picture(v.shot(), blue)
         # ... and so does a shader that does not compile
         scene_file.write_text(SCENE.replace("[0.9, 0.1, 0.1]", "[0.1, 0.1, 0.9]"))
-        trace = shaders / "trace.frag"
+        trace = shaders / "render.frag"
         good_source = trace.read_text()
         trace.write_text(good_source + "\nthis is not GLSL;\n")
         v.stderr.clear()

@@ -283,9 +283,9 @@ def test_a_failed_start_says_what_failed(xdisplay, tmp_path, gl, case):  # noqa:
     if case == "shader":
         shaders = tmp_path / "shaders"
         shutil.copytree(shader_root(), shaders)
-        (shaders / "trace.frag").write_text((shaders / "trace.frag").read_text() + "\nthis is not GLSL;\n")
+        (shaders / "render.frag").write_text((shaders / "render.frag").read_text() + "\nthis is not GLSL;\n")
         env["GLASSRAY_SHADERS"] = str(shaders)
-        expected = ["trace.frag"]
+        expected = ["render.frag"]
     else:
         width = int(gl.info["GL_MAX_TEXTURE_SIZE"]) + 1
         Image.new("RGB", (width, 2), (90, 140, 200)).save(tmp_path / "wide.png")

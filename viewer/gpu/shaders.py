@@ -10,7 +10,7 @@ The file is encoded in the line number itself (file k's line n is numbered
 (k + 1) * LINE_BASE + n), not only in ``#line``'s source-string number:
 Mesa honours the line of ``#line N S`` but prints source string 0 in every
 message.  And since a ``#line`` inside a branch the preprocessor skips is
-skipped too (trace.frag's ``#ifdef FOOTPRINT_AA`` around an include), the
+skipped too (lib/tree.glsl's ``#ifdef FOOTPRINT_AA`` around an include), the
 numbering is set again after every ``#include``, ``#else``, ``#elif`` and
 ``#endif``: whichever branch was taken, the next line has its own number.
 """
@@ -23,6 +23,8 @@ import re
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
+
+import moderngl
 
 _INCLUDE = re.compile(r'^\s*#\s*include\s+"([^"]+)"\s*$')
 _BRANCH = re.compile(r"^\s*#\s*(?:else|elif|endif)\b")
@@ -37,7 +39,7 @@ class ShaderError(RuntimeError):
 
 
 def shader_root() -> Path:
-    """The folder holding trace.frag (inside the installed package, or the
+    """The folder holding the shaders (render.frag, lib/, …) (inside the installed package, or the
     repository's shaders/ for an editable install); the environment
     variable GLASSRAY_SHADERS names another folder (shader work with F5 in
     the viewer, tests)."""
@@ -162,13 +164,37 @@ def explain_compile_error(message: str, files: list[str]) -> str:
     return "\n".join(lines)
 
 
-def build_program(ctx, fragment: str = "trace.frag", vertex: str = "fullscreen.vert",
+#: The entry file (shaders/*.frag) of each kind of pass, by the define that
+#: asks for it; a program that asks for none is a render pass (render.frag).
+#: The contract: a program's defines ask for at most one pass, and its file
+#: follows from its defines alone, so a cache of programs keyed by their
+#: defines (Renderer's) still holds one program per key.  An entry file
+#: makes the pass macros its lib needs itself, so PASS_MACROS are not
+#: passed on; every other define is (the scene's specialisation, feature
+#: switches such as FOOTPRINT_AA or CUT_CHECK, VIEW_MODE's view).
+PASS_ENTRIES = {"FOOTPRINT_SHARE_PASS": "footprint_shares.frag", "ADAPTIVE_FIRST": "adaptive_first.frag",
+                "ADAPTIVE_LIST": "adaptive_list.frag", "RESUME": "resume.frag", "VIEW_MODE": "debug_view.frag"}
+RENDER_ENTRY = "render.frag"
+PASS_MACROS = ("FOOTPRINT_SHARE_PASS", "ADAPTIVE", "ADAPTIVE_FIRST", "ADAPTIVE_LIST", "RESUME")
+
+
+def fragment_for(defines: dict[str, object] | None) -> str:
+    """The entry file of the pass `defines` ask for (PASS_ENTRIES)."""
+    asked = [k for k in PASS_ENTRIES if (defines or {}).get(k) not in (None, False)]
+    if len(asked) > 1:
+        raise ShaderError(f"one pass per program, not {' and '.join(asked)}")
+    return PASS_ENTRIES[asked[0]] if asked else RENDER_ENTRY
+
+
+def build_program(ctx, fragment: str | None = None, vertex: str = "fullscreen.vert",
                   defines: dict[str, object] | None = None, root: Path | None = None,
                   sources: ShaderFiles | None = None):
-    """Compile and link; raise ShaderError with file:line locations."""
+    """Compile and link; raise ShaderError with file:line locations.  The
+    fragment shader is the entry file of the pass `defines` ask for unless
+    named (fragment_for)."""
     vs = load_source(vertex, None, root, sources)
-    fs = load_source(fragment, defines, root, sources)
-    import moderngl
+    fragment = fragment or fragment_for(defines)
+    fs = load_source(fragment, {k: v for k, v in (defines or {}).items() if k not in PASS_MACROS}, root, sources)
 
     try:
         return ctx.program(vertex_shader=vs.text, fragment_shader=fs.text)
