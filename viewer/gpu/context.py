@@ -396,8 +396,6 @@ def size_failure(e: BaseException, w: int, h: int) -> Failure | None:
     """The Failure to report when e is the OpenGL driver (or the host)
     failing to allocate an image of w x h; None for any other error.  Shared
     by render and the viewer (whose window size is the framebuffer's)."""
-    import moderngl
-
     if isinstance(e, MemoryError):
         return Failure(f"cannot render {w}x{h}: not enough memory for an image of that size "
                        "(try a smaller --size)")

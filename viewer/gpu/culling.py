@@ -45,7 +45,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .packing import AXES, bounding_sphere, camera_uniforms, contains_point, rotation_world_from_local, scene_scale
+from .block import camera_uniforms
+from .geometry import AXES, bounding_sphere, contains_point, rotation_world_from_local, scene_scale
 from ..scene.model import Scene
 from ..scene.load import unit_vector
 

@@ -15,26 +15,19 @@ from typing import Callable
 import moderngl
 import numpy as np
 
-from .packing import F32_MAX, camera_uniforms, driver_defines, gpu_frame_scene, pack_scene, radiance_exponent
 from ..base import interrupt
 from ..base.imageio import SkyImageError, read_sky_image
 from ..base.sampling import sample_offsets
 from ..scene.model import Scene
+from . import culling, driver
+from .footprint import FootprintSampler, drain, footprint_default
+from .block import camera_uniforms, pack_scene
+from .defines import shader_defines
+from .driver import driver_defines
+from .frame import F32_MAX, gpu_frame_scene, radiance_exponent
 from .shaders import ShaderFiles, build_program
+from .driver import CULL_MAX_OBJECTS, DEFAULT_TILE
 
-# Side of the tiles a render draws and finishes one at a time (Ctrl-C and the
-# progress bar act between them): a frame up to 2048x2048 is one tile.  On
-# llvmpipe each finish leaves a core idle while the other ends its last bins:
-# 512 (six tiles at 1280x720) cost the default frame 5% (1 sample, Mesa 25).
-# Deep trees, which could meet a slow GPU's ~2 s watchdog, are drawn in their
-# own resumable passes of RESUME_TILE (Renderer.render).
-DEFAULT_TILE = 2048
-
-
-#: Scenes with more objects are drawn unculled: a shader listing dozens of
-#: objects takes seconds to compile on llvmpipe, and culling would compile
-#: several (bench-many, 43 objects: 5 s each).
-CULL_MAX_OBJECTS = 24
 
 
 def intersect_rect(a: tuple[int, int, int, int], b: tuple[int, int, int, int]) -> tuple[int, int, int, int] | None:
@@ -45,7 +38,7 @@ def intersect_rect(a: tuple[int, int, int, int], b: tuple[int, int, int, int]) -
 
 def cut_marks(image: np.ndarray) -> np.ndarray:
     """Where a sum of samples holds one cut short by the driver's loop limit
-    (shaders/trace.frag, CUT_CHECK: -inf, or NaN where it met a +inf)."""
+    (shaders/render.frag, CUT_CHECK: -inf, or NaN where it met a +inf)."""
     return np.isnan(image) | np.isneginf(image)
 
 
@@ -65,8 +58,8 @@ def clamp_radiance(image: np.ndarray) -> np.ndarray:
 
 class Renderer:
     #: Draw the specialised shader per group of screen tiles, each with the
-    #: objects its rays can meet (viewer/culling.py).  Off for renderers
-    #: whose camera is not the scene's (viewer/quality.py's window).
+    #: objects its rays can meet (viewer/gpu/culling.py).  Off for renderers
+    #: whose camera is not the scene's (viewer/measure/quality.py's window).
     cull = True
     COMPILES_PER_DRAW = 1
     SUBSET_PROGRAMS = 16
@@ -78,7 +71,7 @@ class Renderer:
         fresnel="schlick" Schlick's approximation: both only for comparisons
         in the benchmark.  extra_defines are added to every program (the
         stress suite's NAIVE_INTERSECT), after the driver's own
-        (gpu_scene.driver_defines).
+        (gpu/driver.py driver_defines).
 
         eager: set_scene compiles the scene's full program at once, so that
         a shader the driver rejects fails there (the viewer keeps its last
@@ -112,7 +105,7 @@ class Renderer:
         self._camera: dict = {}
         self._fbo_tex: moderngl.Texture | None = None
         self._readback: bytearray | None = None     # _read_rgb's buffer, the target's size
-        self._footprints = None           # footprint_sampler's AdaptiveSampler
+        self._footprints = None           # footprint_sampler's FootprintSampler
         #: shader programs this renderer has built (a benchmark checks that
         #: its timed renders build none)
         self.programs_built = 0
@@ -133,7 +126,7 @@ class Renderer:
         `self.scene` is the scene in the GPU's units: `scene` itself, or for
         a scene far outside float32's comfortable scale, a copy with its
         lengths times 2^length_exponent and its far lights and planes
-        brought within reach of the eye (gpu_scene.gpu_frame_scene); the
+        brought within reach of the eye (gpu/frame.py gpu_frame_scene); the
         image is the same."""
         scene, self.length_exponent = gpu_frame_scene(scene)
         packed = pack_scene(scene, self.specialise, self.fresnel)
@@ -175,7 +168,7 @@ class Renderer:
 
     def _update_sky(self, scene: Scene) -> None:
         path = scene.sky.image_path if scene.sky.type == "image" else None
-        # the picture is a source of light: times the sources' 2^r (gpu_scene.radiance_exponent)
+        # the picture is a source of light: times the sources' 2^r (gpu/frame.py radiance_exponent)
         key = None if path is None else (path, radiance_exponent(scene))
         if key == self._sky_path and self._sky is not None:
             return
@@ -206,7 +199,7 @@ class Renderer:
         blending is on).  viewport limits the work to a rectangle (x, y, w, h)
         in framebuffer pixels, bottom-left origin.  The specialised shader
         draws each group of screen tiles with a variant compiled for the
-        objects its rays can meet (viewer/culling.py); the image is the same.
+        objects its rays can meet (viewer/gpu/culling.py); the image is the same.
         compile=False compiles nothing new (the viewer's previews while the
         camera moves: a compile on llvmpipe takes up to a second): a group
         whose variant is not ready is drawn with a ready variant for more
@@ -261,9 +254,6 @@ class Renderer:
                 compile_all: bool = False, compile: bool = True) -> list[tuple[moderngl.Program, tuple]]:
         """The culling plan of this camera and size, its programs (with the
         `extra` defines) compiled."""
-        from . import culling
-        from .packing import shader_defines
-
         extra = dict(extra or {})
         key = culling.plan_key(self.scene, width, height)
         if key != self._plan_key:
@@ -307,8 +297,6 @@ class Renderer:
         objects that include `subset`, or None.  A variant compiled for an
         earlier scene counts only if it is still the one its objects would
         get (its defines list each object's shape by index)."""
-        from .packing import shader_defines
-
         want = set(subset)
         for key, (objs, ek) in sorted(self._subset_of.items(), key=lambda kv: len(kv[1][0])):
             if ek == extra_key and want <= objs:
@@ -414,21 +402,19 @@ class Renderer:
         """Whether render() of `samples` samples takes footprint samples
         unless told otherwise: with more than one sample (one is the spec's
         centred point sample) where the scene has a checkered plane."""
-        from ..adaptive.sampler import footprint_default
         return samples > 1 and footprint_default(self.scene)
 
     def footprint_sampler(self, width: int, height: int):
-        """An AdaptiveSampler of this size whose footprint mask holds, for the
+        """A FootprintSampler of this size whose footprint mask holds, for the
         current camera, every pixel whose four corner rays meet one
         checkered plane first, with its closed-form share: what the
         FOOTPRINT_SAMPLES variants read.  Kept for the next render of this
         size (its targets cost as much to make as a sample of the sky)."""
-        from ..adaptive.sampler import AdaptiveSampler, drain
         s = self._footprints
         if s is None or (s.width, s.height) != (width, height):
             if s is not None:
                 s.release()
-            s = self._footprints = AdaptiveSampler(self, width, height, footprint=True)
+            s = self._footprints = FootprintSampler(self, width, height)
             s.sync_draws = False
         drain(s.direct_footprints())
         return s
@@ -452,8 +438,7 @@ class Renderer:
         if footprint is None:
             footprint = self.takes_footprint(samples)
         fp = self.footprint_sampler(width, height) if footprint else None
-        from ..adaptive.sampler import AdaptiveSampler
-        footprint_defines = AdaptiveSampler.FOOTPRINT_SAMPLES if fp is not None else {}
+        footprint_defines = FootprintSampler.FOOTPRINT_SAMPLES if fp is not None else {}
         resume = None
         self._resume_budget = self.RESUME_BUDGET    # halved where a pass meets the loop limit
         self.last_render_resumed = self._force_resume or self.resumes()
@@ -514,7 +499,7 @@ class Renderer:
         finally:
             ctx.disable(moderngl.BLEND)
         image = self._read_rgb(fbo, samples)
-        # a sample cut short is -inf (shaders/trace.frag, CUT_CHECK), and
+        # a sample cut short is -inf (shaders/render.frag, CUT_CHECK), and
         # stays -inf in the sum (or NaN where it met an inf); about 1 ms at
         # 1280x720.  (Not "anything below 0": a footprint sample is a control
         # variate, and a pixel's mean of few of them can be below 0, which
@@ -527,20 +512,10 @@ class Renderer:
                 self._force_resume = False
         return clamp_radiance(image)
 
-    #: Nodes of a ray tree one resumable pass traces at most, to begin with
-    #: (shaders/trace.frag, RESUME): well below what ends a shader on
-    #: llvmpipe (65535 loop iterations in all: about a hundred a node with
-    #: one light, more with many) or a draw on a GPU's watchdog.  A pass
-    #: that meets the limit anyway hands its cut nodes back and the next
-    #: passes take half as many.
-    RESUME_BUDGET = 512
-    #: Tile side of resumable renders: a pass over it stays well under a
-    #: second on llvmpipe, so Ctrl-C (taken between passes) ends at once.
-    RESUME_TILE = 64
-
-    #: Trees whose bound (resumes) exceeds this many nodes are drawn in
-    #: resumable passes at once: one draw would only be cut and drawn again.
-    RESUME_AT_ONCE = 16384
+    #: the driver's limits on one draw (gpu/driver.py says why each is what it is)
+    RESUME_BUDGET = driver.RESUME_BUDGET
+    RESUME_TILE = driver.RESUME_TILE
+    RESUME_AT_ONCE = driver.RESUME_AT_ONCE
     #: Whether render() checks a one-pass image of a glass scene for trees
     #: cut short (False: trust it, as the viewer does; for measuring the check).
     cut_check = True
