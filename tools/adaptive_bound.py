@@ -3,7 +3,7 @@ estimate could do: the measurement behind docs/adaptive.md's "The bound of
 point samples" (issue 7).
 
 For each scene at 320x180 it records, for every pixel that the corner and
-centre rays flag (viewer/adaptive.py, step 1), each of the first 256
+centre rays flag (viewer/adaptive/, step 1), each of the first 256
 samples separately (one list pass per sample index), for the render seed
 and for SEEDS other scrambles of the same points.  Then it replays the
 adaptive render (``AdaptiveRender`` itself, its sampler replaced by one
@@ -47,9 +47,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import adaptive_vs_uniform as avu  # noqa: E402
 
-from viewer.adaptive import sampler as adaptive
+from viewer.adaptive.estimators import FIRST_ROUND, Sums  # noqa: E402
 from viewer.measure import bench  # noqa: E402
-from viewer.adaptive.sampler import AdaptiveRender, AdaptiveSampler, Sums, drain  # noqa: E402
+from viewer.adaptive.render import AdaptiveRender, render_adaptive  # noqa: E402
+from viewer.adaptive.sampler import AdaptiveSampler  # noqa: E402
+from viewer.gpu.footprint import drain  # noqa: E402
 from viewer.base.sampling import progressive_offsets  # noqa: E402
 from viewer.scene.load import load_scene  # noqa: E402
 
@@ -159,9 +161,9 @@ def greedy(rec: Recording, expected: np.ndarray, budget: int) -> np.ndarray:
     error^2 / n is largest, from FIRST_ROUND for every flagged pixel, until
     `budget` rays per pixel (centres and corners included) are spent."""
     m = len(rec.flat)
-    n = np.full(m, adaptive.FIRST_ROUND, np.int64)
+    n = np.full(m, FIRST_ROUND, np.int64)
     w, h = rec.width, rec.height
-    left = budget * w * h - w * h - (w + 1) * (h + 1) - (adaptive.FIRST_ROUND - 1) * m
+    left = budget * w * h - w * h - (w + 1) * (h + 1) - (FIRST_ROUND - 1) * m
     heap = [(-expected[k, n[k]] ** 2 / n[k], k) for k in range(m)]
     heapq.heapify(heap)
     while heap:
@@ -212,7 +214,7 @@ def measure(names: list[str]) -> list[dict]:
         expected = np.sqrt(sq / len(SEEDS))
         table = {"real": [], "estimate": [], "expected": [], "greedy": []}
         for b in BUDGETS:
-            table["real"].append(rmse(adaptive.render_adaptive(r, W, H, b, seed=bench.RENDER_SEED, footprint=False).image, ref))
+            table["real"].append(rmse(render_adaptive(r, W, H, b, seed=bench.RENDER_SEED, footprint=False).image, ref))
             job = AdaptiveRender(r, W, H, b, seed=bench.RENDER_SEED, sampler=ReplaySampler(rec))
             table["estimate"].append(rmse(job.run().image, ref))
             job = ExpectedErrorRender(r, W, H, b, seed=bench.RENDER_SEED, sampler=ReplaySampler(rec))

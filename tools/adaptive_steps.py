@@ -27,7 +27,9 @@ import moderngl
 from viewer.measure import bench
 import numpy as np
 
-from viewer.adaptive.sampler import AdaptiveRender, AdaptiveSampler, drain, footprint_planes
+from viewer.adaptive.render import AdaptiveRender
+from viewer.adaptive.sampler import AdaptiveSampler
+from viewer.gpu.footprint import drain, footprint_planes
 from viewer.gpu.renderer import Renderer
 from viewer.scene.load import load_scene
 
@@ -65,7 +67,8 @@ def passes(name: str, w: int = 320, h: int = 180) -> None:
 
 
 def glass(name: str, w: int = 320, h: int = 180) -> None:
-    from viewer.adaptive.sampler import HEAVY_RAYS, _offsets, image_coherent_order
+    from viewer.adaptive.pixel_lists import HEAVY_RAYS, image_coherent_order
+    from viewer.adaptive.render import _offsets
 
     ctx = moderngl.create_standalone_context(backend="egl")
     r = Renderer(ctx, load_scene(name))

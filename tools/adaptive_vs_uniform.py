@@ -90,7 +90,8 @@ def references(names: list[str]) -> None:
 def measure(names: list[str]) -> None:
     import moderngl
 
-    from viewer.adaptive.sampler import DEFAULT_TARGET_ERROR, AdaptiveSampler, render_adaptive
+    from viewer.adaptive.render import DEFAULT_TARGET_ERROR, render_adaptive
+    from viewer.adaptive.sampler import AdaptiveSampler
     from viewer.gpu.renderer import Renderer
 
     ctx = moderngl.create_standalone_context(backend="egl")

@@ -1,4 +1,4 @@
-"""Adaptive anti-aliasing (viewer/adaptive.py) and its command line
+"""Adaptive anti-aliasing (viewer/adaptive/) and its command line
 (`glassray render --adaptive/--no-adaptive`, `--target-error E`,
 `--view samples`).
 
@@ -27,9 +27,15 @@ import pytest
 from PIL import Image
 
 from conftest import make_scene
-from viewer.adaptive import sampler as A
-from viewer.adaptive.sampler import FIRST_ROUND, MAX_SPP_FACTOR, ROUND_FACTOR, AdaptiveRender, AdaptiveSampler, Sums, checker_cells_differ, choose_by_gain, choose_within_budget, coherent_order, colour_contrast, corner_contrast, corner_directions, corner_objects_differ, drain, list_slots, list_width, next_count, own_error, prefix_error, render_adaptive, sliver_error, spread_error, standard_error
-from viewer.gpu.packing import camera_uniforms
+from viewer.adaptive import chains, estimators, pixel_lists
+from viewer.adaptive import render as adaptive_render
+from viewer.gpu import footprint
+from viewer.adaptive.estimators import FIRST_ROUND, ROUND_FACTOR, Sums, checker_cells_differ, choose_by_gain, choose_within_budget, colour_contrast, corner_contrast, corner_directions, corner_objects_differ, next_count, own_error, prefix_error, sliver_error, spread_error, standard_error
+from viewer.adaptive.render import MAX_SPP_FACTOR, AdaptiveRender, render_adaptive
+from viewer.adaptive.sampler import AdaptiveSampler
+from viewer.adaptive.pixel_lists import coherent_order, list_slots, list_width
+from viewer.gpu.footprint import drain
+from viewer.gpu.block import camera_uniforms
 from viewer.base.imageio import to_display8
 from viewer.reference.trace import render_reference
 from viewer.gpu.renderer import DEFAULT_TILE, Renderer
@@ -344,11 +350,11 @@ def test_list_width_spreads_short_lists_over_several_bands():
     """The list is 64 wide for long lists, narrower for short ones so that
     it spans at least LIST_MIN_BINS bands of 64 rows (llvmpipe shades a
     64x64 square on one thread), never under 4 wide."""
-    assert list_width(10 ** 6) == A.LIST_WIDTH
+    assert list_width(10 ** 6) == pixel_lists.LIST_WIDTH
     for n in (1, 10, 500, 4000, 20000, 40000):
         lw = list_width(n)
-        assert lw % 4 == 0 and 4 <= lw <= A.LIST_WIDTH
-        assert lw == 4 or n >= lw * 64 * A.LIST_MIN_BINS
+        assert lw % 4 == 0 and 4 <= lw <= pixel_lists.LIST_WIDTH
+        assert lw == 4 or n >= lw * 64 * pixel_lists.LIST_MIN_BINS
 
 
 @pytest.mark.parametrize("count, width", [(1, 4), (17, 4), (192, 4), (600, 8), (5000, 64), (70000, 4)])
@@ -359,19 +365,19 @@ def test_run_slots_deal_short_runs_over_bands(count, width):
     blocks) of them, as evenly as whole blocks allow (llvmpipe shades each
     64x64 square on one thread: a short run in one band ran on one core);
     a long one stays list_slots' dense layout."""
-    bands = A.run_bands(count, width)
-    slots = A.run_slots(count, width, bands)
+    bands = pixel_lists.run_bands(count, width)
+    slots = pixel_lists.run_slots(count, width, bands)
     assert len(np.unique(slots)) == count
     x, y = slots % width, slots // width
-    assert x.max() < width and y.max() < A.run_rows(count, width, bands)
+    assert x.max() < width and y.max() < pixel_lists.run_rows(count, width, bands)
     for k in range(0, count, 16):
         bx, by = x[k:k + 16], y[k:k + 16]
         assert bx.max() - bx.min() < 4 and by.max() - by.min() < 4 and bx.min() % 4 == 0 and by.min() % 4 == 0
     blocks = -(-count // 16)
-    if blocks >= A.LIST_MIN_BINS * (width // 4) * 16:
+    if blocks >= pixel_lists.LIST_MIN_BINS * (width // 4) * 16:
         assert bands == 1 and np.array_equal(slots, list_slots(count, width))
     else:
-        assert bands == min(A.LIST_MIN_BINS, blocks)
+        assert bands == min(pixel_lists.LIST_MIN_BINS, blocks)
         per_band = np.bincount(y // 64, minlength=bands)
         assert len(per_band) == bands and per_band.max() - per_band.min() <= 16
 
@@ -381,14 +387,14 @@ def test_split_factor_fills_a_short_run_with_whole_parts():
     the fewest equal parts per pixel that make MIN_RUN_ENTRIES entries and
     hold at most `most` samples each, or one sample an entry; a long run
     without `most` is not split."""
-    m = A.MIN_RUN_ENTRIES
-    assert A.split_factor(m, 32) == 1 and A.split_factor(10 ** 5, 64) == 1
-    assert A.split_factor(5, 0) == 1 and A.split_factor(5, 1) == 1
-    assert A.split_factor(10 ** 5, 64, most=4) == 16
+    m = pixel_lists.MIN_RUN_ENTRIES
+    assert pixel_lists.split_factor(m, 32) == 1 and pixel_lists.split_factor(10 ** 5, 64) == 1
+    assert pixel_lists.split_factor(5, 0) == 1 and pixel_lists.split_factor(5, 1) == 1
+    assert pixel_lists.split_factor(10 ** 5, 64, most=4) == 16
     for length in (1, 6, 40, 100, 300, m - 1, m, 10 ** 4):
         for samples in (3, 4, 8, 24, 32, 56, 64):
             for most in (None, 1, 4, 8):
-                d = A.split_factor(length, samples, most)
+                d = pixel_lists.split_factor(length, samples, most)
                 cap = samples if most is None else most
                 assert samples % d == 0
 
@@ -405,9 +411,9 @@ def test_entry_samples_scale_with_cost():
     """A costly pixel's entries hold the largest power of two of samples
     whose rays stay within ENTRY_RAYS (at least one sample); a cheap one's
     (HEAVY_RAYS or fewer rays a sample) are not limited (0)."""
-    assert A.ENTRY_RAYS == 32 and A.HEAVY_RAYS == 4           # the values below are for these
+    assert pixel_lists.ENTRY_RAYS == 32 and pixel_lists.HEAVY_RAYS == 4           # the values below are for these
     cost = np.array([1, 4, 4.5, 6, 8, 9, 16, 17, 26, 100])
-    np.testing.assert_array_equal(A.entry_samples(cost), [0, 0, 4, 4, 4, 2, 2, 1, 1, 1])
+    np.testing.assert_array_equal(pixel_lists.entry_samples(cost), [0, 0, 4, 4, 4, 2, 2, 1, 1, 1])
 
 
 def test_split_entries_give_each_pixel_its_own_sums(renderer_for):
@@ -430,10 +436,10 @@ def test_split_entries_give_each_pixel_its_own_sums(renderer_for):
         s = AdaptiveSampler(r, w, h)
         try:
             s.split_entries = split
-            s.set_offsets(A._offsets(64, 1))
+            s.set_offsets(adaptive_render._offsets(64, 1))
             if rays is not None:
                 parts = s._split(pixels, count, rays)
-                limit = A.entry_samples(rays)
+                limit = pixel_lists.entry_samples(rays)
                 assert np.all((limit == 0) | (count // parts <= limit)), (parts, limit)
                 assert np.all(count % parts == 0)
                 with pytest.raises(TypeError):
@@ -471,7 +477,7 @@ def test_standard_error_of_hand_made_samples():
     np.testing.assert_allclose(sums.mean[0, 0], [0.5, 0, 0], atol=1e-12)
     # the spread term: se x n^(1/2 - SPREAD_EXPONENT)
     n = np.array([len(c[0]) for c in cases], float)
-    np.testing.assert_allclose(spread_error(sums)[0], [c[1] for c in cases] * n ** (0.5 - A.SPREAD_EXPONENT),
+    np.testing.assert_allclose(spread_error(sums)[0], [c[1] for c in cases] * n ** (0.5 - estimators.SPREAD_EXPONENT),
                                atol=1e-6)
 
 
@@ -510,9 +516,9 @@ def test_own_error_blends_prefix_and_spread_and_keeps_the_sliver():
     prev = np.array([[[0.4 * 4] * 3 + [4], [2.0, 0, 0, 4]]])    # means 0.4 and 0.5 at 4 samples
     contrast = np.array([[0.3, 0.0]])
     got = own_error(sums, prev, contrast)[0]
-    assert got[0] == pytest.approx(A.SLIVER * 0.3 / 8)
+    assert got[0] == pytest.approx(estimators.SLIVER * 0.3 / 8)
     assert sliver_error(contrast, 8)[0, 0] == pytest.approx(got[0])
-    w = A.SPREAD_WEIGHT
+    w = estimators.SPREAD_WEIGHT
     expect = (1 - w) * prefix_error(sums.total, prev)[0, 1] + w * spread_error(sums)[0, 1]
     assert got[1] == pytest.approx(expect) and got[1] > 0
 
@@ -988,7 +994,7 @@ def test_budget_and_per_pixel_cap(renderer_for, key, samples, max_spp):
     res = render_adaptive(r, w, h, samples=samples, seed=1, max_spp=max_spp,
                           progress=lambda done, total: calls.append((done, total)))
     s = samples or r.scene.render.samples
-    cap = max_spp or min(MAX_SPP_FACTOR * s, A.MAX_SPP)
+    cap = max_spp or min(MAX_SPP_FACTOR * s, adaptive_render.MAX_SPP)
     assert res.spp.dtype.kind == "i" and np.all(res.spp >= 1)
     assert res.spp.sum() <= s * w * h
     assert res.mean_spp <= s
@@ -1019,15 +1025,15 @@ def test_no_round_starts_on_the_last_sliver_of_the_budget(renderer_for):
         return [budget - s for s in spent[1:-1]]                          # the left of each round's start
 
     res = render_adaptive(r, w, h, samples=6, target_error=1e-6, seed=1)
-    assert min(starts(res)) >= A.TAIL_SHARE * budget
-    assert res.rays <= budget and budget - res.rays < A.TAIL_SHARE * budget
-    old = A.TAIL_SHARE
+    assert min(starts(res)) >= adaptive_render.TAIL_SHARE * budget
+    assert res.rays <= budget and budget - res.rays < adaptive_render.TAIL_SHARE * budget
+    old = adaptive_render.TAIL_SHARE
     try:
-        A.TAIL_SHARE = 0.0
+        adaptive_render.TAIL_SHARE = 0.0
         untrimmed = render_adaptive(r, w, h, samples=6, target_error=1e-6, seed=1)
     finally:
-        A.TAIL_SHARE = old
-    assert min(starts(untrimmed)) < A.TAIL_SHARE * budget
+        adaptive_render.TAIL_SHARE = old
+    assert min(starts(untrimmed)) < adaptive_render.TAIL_SHARE * budget
     assert len(untrimmed.rounds) > len(res.rounds)
 
 
@@ -1094,15 +1100,15 @@ def test_draw_layout_does_not_change_the_result(gl, renderer_for, monkeypatch, l
     test checks that the layout really changed (more draws, or a wider
     list)."""
     sizes = []
-    spying = hasattr(A.AdaptiveSampler, "_list_target")
+    spying = hasattr(AdaptiveSampler, "_list_target")
     if spying:
-        original = A.AdaptiveSampler._list_target
+        original = AdaptiveSampler._list_target
 
         def spy(self, lw, lh):
             sizes.append((lw, lh))
             return original(self, lw, lh)
 
-        monkeypatch.setattr(A.AdaptiveSampler, "_list_target", spy)
+        monkeypatch.setattr(AdaptiveSampler, "_list_target", spy)
 
     def run(renderer):
         job = AdaptiveRender(renderer, 48, 27, samples=8, seed=4)
@@ -1114,9 +1120,9 @@ def test_draw_layout_does_not_change_the_result(gl, renderer_for, monkeypatch, l
     expect, draws = run(renderer_for("lit", LIT))
     default_sizes, sizes[:] = list(sizes), []
     if layout == "wide-list":
-        monkeypatch.setattr(A, "MAX_LIST_HEIGHT", 4)
+        monkeypatch.setattr(pixel_lists, "MAX_LIST_HEIGHT", 4)
     else:
-        monkeypatch.setattr(A, "FRAGMENTS_PER_DRAW", 1 if layout == "one-row-per-draw" else 600)
+        monkeypatch.setattr(footprint, "FRAGMENTS_PER_DRAW", 1 if layout == "one-row-per-draw" else 600)
     other = Renderer(gl, make_scene(LIT), tile=16 if layout != "wide-list" else DEFAULT_TILE)
     try:
         got, draws_now = run(other)
@@ -1160,7 +1166,7 @@ def test_cli_adaptive_writes_the_image_and_reports_the_mean(renderer_for, tmp_pa
     lines = MEAN_LINE.findall(r.stderr)
     assert len(lines) == 1, r.stderr
     mean, budget, target = lines[0]
-    assert budget == "16" and float(target) == A.DEFAULT_TARGET_ERROR == 0.002 and float(mean) <= 16
+    assert budget == "16" and float(target) == adaptive_render.DEFAULT_TARGET_ERROR == 0.002 and float(mean) <= 16
     img = np.load(tmp_path / "a.npy")
     assert img.dtype == np.float32 and img.shape == (27, 48, 3)
     converged = renderer_for("glass-sphere").render(48, 27, 1024, seed=5)
@@ -1265,7 +1271,7 @@ def test_cli_timing_with_adaptive_prints_the_spec_line(tmp_path):
 
 def test_culled_adaptive_render_is_the_unculled_one(gl):
     """The adaptive passes draw each group of screen tiles with its culling
-    variant (viewer/culling.py), and the variant is exact: the same render
+    variant (viewer/gpu/culling.py), and the variant is exact: the same render
     with culling off (every pixel through the full shader) gives the same
     samples map and, bit for bit, the same image.  The default scene at
     128x72 is drawn with several variants (checked)."""
@@ -1369,7 +1375,7 @@ def exact_checker_share(scene, w: int, h: int, i: int, j: int) -> float:
     (its corner rays' hits: a convex quadrilateral, since a projective map
     keeps straight lines) is clipped to each checker square in floor (x, z)
     coordinates, and each piece, mapped back into the image vertex by
-    vertex, is measured there.  Another route than trace.frag's
+    vertex, is measured there.  Another route than the shaders'
     (half-planes in the image and inclusion-exclusion)."""
     cam = {k: np.array(v, np.float64) for k, v in camera_uniforms(scene, w, h).items()}
     eye = np.array(scene.camera.position, np.float64)
@@ -1422,7 +1428,7 @@ def test_footprint_samples_are_the_checker_box_filtered_over_the_pixel(renderer_
     sampler = AdaptiveSampler(r, w, h, footprint=True)
     try:
         _, _, corner_obj = drain(sampler.corner_pass())
-        planes = A.footprint_planes(r.scene, corner_obj)
+        planes = footprint.footprint_planes(r.scene, corner_obj)
         mask = planes >= 0
         assert 0.5 < mask.mean() < 1.0 and set(np.unique(planes)) == {-1, 0}    # the sky is in view too
         sampler.set_footprint(planes)
@@ -1443,7 +1449,7 @@ def test_footprint_samples_are_the_checker_box_filtered_over_the_pixel(renderer_
     for j, i in zip(*np.nonzero(mask)):
         f = exact_checker_share(r.scene, w, h, i, j)
         cells = _cells_spanned(r.scene, w, h, i, j)
-        if cells[0] * cells[1] > A.MAX_PIXEL_CORNERS or cells[0] + cells[1] > A.MAX_PIXEL_LINES:
+        if cells[0] * cells[1] > footprint.MAX_PIXEL_CORNERS or cells[0] + cells[1] > footprint.MAX_PIXEL_LINES:
             continue                                     # the fallback's (tested below)
         kind = "none" if cells == (0, 0) else "both" if min(cells) > 0 else "one axis"
         kinds["many" if cells[0] * cells[1] > 16 else kind] += 1
@@ -1482,7 +1488,7 @@ def test_uniform_renders_take_footprint_samples_from_two_samples_on(renderer_for
     checked = 0
     for j, i in zip(*np.nonzero(mask)):
         cells = _cells_spanned(r.scene, w, h, i, j)
-        if cells[0] * cells[1] > A.MAX_PIXEL_CORNERS or cells[0] + cells[1] > A.MAX_PIXEL_LINES:
+        if cells[0] * cells[1] > footprint.MAX_PIXEL_CORNERS or cells[0] + cells[1] > footprint.MAX_PIXEL_LINES:
             continue
         f = exact_checker_share(r.scene, w, h, i, j)
         want = (1 - f) * FLOOR + f * CHECKER
@@ -1497,7 +1503,7 @@ def test_uniform_renders_take_footprint_samples_from_two_samples_on(renderer_for
 
 def _cells_spanned(scene, w, h, i, j) -> tuple[int, int]:
     """How many checker lines of x and of z the corner rays of pixel (i, j)
-    span on the floor (trace.frag's pixelCoverage bounds its work by these)."""
+    span on the floor (lib/footprint.glsl's pixelCoverage bounds its work by these)."""
     d = corner_directions(scene, w, h)[j:j + 2, i:i + 2].reshape(-1, 3)
     eye = np.array(scene.camera.position, np.float64)
     p = eye + d * (-eye[1] / d[:, 1])[:, None]
@@ -1520,7 +1526,7 @@ def test_a_checker_taken_exactly_keeps_one_sample(renderer_for):
     job = AdaptiveRender(r, w, h, 8, seed=0)
     try:
         res = job.run()
-        exact = job.sampler.footprint_kind == A.FOOTPRINT_EXACT
+        exact = job.sampler.footprint_kind == footprint.FOOTPRINT_EXACT
     finally:
         job.release()
     assert 0.3 < exact.mean() and np.array_equal(exact & job.footprint_mask, exact)
@@ -1548,9 +1554,9 @@ def test_square_homography_maps_the_unit_square_onto_the_four_points():
         def image(u, v, m=m):
             x = m @ np.array([u, v, 1.0])
             return x[:2] / x[2]
-        rows = A.square_homography(np.array([image(0, 0), image(1, 0), image(0, 1), image(1, 1)]))
+        rows = chains.square_homography(np.array([image(0, 0), image(1, 0), image(0, 1), image(1, 1)]))
         for u, v in probe:
-            x, z, _ = A.apply_homography(rows, u, v)
+            x, z, _ = chains.apply_homography(rows, u, v)
             assert np.allclose([x, z], image(u, v), rtol=1e-9, atol=1e-9)
 
 
@@ -1582,7 +1588,7 @@ def test_chain_footprints_take_a_projective_grid_and_refuse_a_bent_one():
         q = m[2, 0] * i + m[2, 1] * j + m[2, 2]
         return (m[0, 0] * i + m[0, 1] * j + m[0, 2]) / q, (m[1, 0] * i + m[1, 1] * j + m[1, 2]) / q
 
-    found = A.chain_footprints(CHAIN_PLANE, _corner_grid(w, h, proj))
+    found = chains.chain_footprints(CHAIN_PLANE, _corner_grid(w, h, proj))
     out = found.dense()
     has = out[..., 7] > 0
     assert np.array_equal(found.mask, has)
@@ -1591,31 +1597,31 @@ def test_chain_footprints_take_a_projective_grid_and_refuse_a_bent_one():
     for j, i in zip(*np.nonzero(has)):
         rows = out[j, i, [0, 1, 2, 4, 5, 6, 8, 9, 10]].astype(np.float64).reshape(3, 3)
         for u, v in ((0.5, 0.5), (0.2, 0.9), (1.0, 0.0)):
-            x, z, _ = A.apply_homography(rows, u, v)
+            x, z, _ = chains.apply_homography(rows, u, v)
             assert np.allclose([x, z], proj(i + u, j + v), atol=2e-6)
         p = [np.array(proj(i + a, j + b)) for a, b in ((0, 0), (1, 0), (1, 1), (0, 1))]
         d1, d2 = p[2] - p[0], p[3] - p[1]
         side = math.sqrt(0.5 * abs(d1[0] * d2[1] - d1[1] * d2[0]))
-        assert math.isclose(math.sqrt(out[j, i, 11]), A.CHAIN_TOLERANCE * side, rel_tol=1e-4)
+        assert math.isclose(math.sqrt(out[j, i, 11]), chains.CHAIN_TOLERANCE * side, rel_tol=1e-4)
 
     def bent(i, j):                       # a bend of 0.1 x the side per pixel squared
         x, z = proj(i, j)
         return x + 0.1 * 0.11 * (i - 6.0) ** 2, z
-    assert not (A.chain_footprints(CHAIN_PLANE, _corner_grid(w, h, bent)).mask).any()
+    assert not (chains.chain_footprints(CHAIN_PLANE, _corner_grid(w, h, bent)).mask).any()
 
     grid = _corner_grid(w, h, proj)
     grid[4, 5, 2] = 8.0                   # another chain at corner (5, 4)
-    has2 = A.chain_footprints(CHAIN_PLANE, grid).mask
+    has2 = chains.chain_footprints(CHAIN_PLANE, grid).mask
     near = np.zeros((h, w), bool)
     near[2:6, 3:7] = True                 # pixels whose corners or neighbouring corners include it
     assert not (has2 & near)[3:5, 4:6].any() and np.array_equal(has2 & ~near, has & ~near)
-    assert not (A.chain_footprints(CHAIN_PLANE, _corner_grid(w, h, proj, ident=0.0)).mask).any()
+    assert not (chains.chain_footprints(CHAIN_PLANE, _corner_grid(w, h, proj, ident=0.0)).mask).any()
     planes = np.full((h, w), -1)
     planes[4, 6] = 0
-    assert not A.chain_footprints(CHAIN_PLANE, _corner_grid(w, h, proj), planes).mask[4, 6]
+    assert not chains.chain_footprints(CHAIN_PLANE, _corner_grid(w, h, proj), planes).mask[4, 6]
     plain = make_scene({"lights": [], "materials": {"f": {"color": [0.8] * 3}},
                         "objects": [{"type": "plane", "material": "f"}]}, name="plain-plane")
-    assert not (A.chain_footprints(plain, _corner_grid(w, h, proj)).mask).any()
+    assert not (chains.chain_footprints(plain, _corner_grid(w, h, proj)).mask).any()
 
 
 SLAB_CHECKER = {
@@ -1646,8 +1652,8 @@ def test_chain_footprints_take_the_checker_seen_through_glass(renderer_for):
     sampler = AdaptiveSampler(r, w, h, footprint=True)
     try:
         _, _, corner_obj = drain(sampler.corner_pass())
-        planes = A.footprint_planes(r.scene, corner_obj)
-        chain = A.chain_footprints(r.scene, sampler.corner_chain, planes)
+        planes = footprint.footprint_planes(r.scene, corner_obj)
+        chain = chains.chain_footprints(r.scene, sampler.corner_chain, planes)
         has = chain.mask
         sampler.set_footprint(planes, chain)
         with_chain, _, _ = drain(sampler.first_pass())
@@ -1703,11 +1709,11 @@ def test_corner_chains_differ_of_a_hand_made_grid():
     grid = _corner_grid(w, h, lambda i, j: (0.1 * i, 0.2 * j), ident=7.0)
     grid[:, 3:, 2] = 11.0
     grid[:, :, 3] = np.arange(w + 1)[None, :] % 2      # objects alternating: ignored
-    got = A.corner_chains_differ(grid)
+    got = estimators.corner_chains_differ(grid)
     assert got.shape == (h, w)
     assert got[:, 2].all() and got.sum() == h
     grid[0, 0, 2] = 0.0                                 # the camera ray's own chain at one corner
-    got = A.corner_chains_differ(grid)
+    got = estimators.corner_chains_differ(grid)
     assert got[0, 0] and got.sum() == h + 1
 
 
@@ -1740,12 +1746,12 @@ def test_the_glass_outline_against_the_sky_takes_samples(renderer_for):
     r = renderer_for("default")
     scene = r.scene
     w, h = 320, 180
-    d = A.corner_directions(scene, w, h)
+    d = estimators.corner_directions(scene, w, h)
     glass = next(o for o in scene.objects if o.name == "glass")
     hit = _hits_upright_cylinder(np.array(scene.camera.position), d, glass.radius, 0.0, glass.height)
-    corners, up = A._corners(hit), A._corners(d[..., 1] > 0.0)
-    outline = (A._fold(np.logical_or, corners) & ~A._fold(np.logical_and, corners)
-               & A._fold(np.logical_and, [u | c for u, c in zip(up, corners)]))
+    corners, up = footprint.pixel_corners(hit), footprint.pixel_corners(d[..., 1] > 0.0)
+    outline = (footprint.fold(np.logical_or, corners) & ~footprint.fold(np.logical_and, corners)
+               & footprint.fold(np.logical_and, [u | c for u, c in zip(up, corners)]))
     assert outline.sum() > 80
     job = AdaptiveRender(r, w, h, 8, seed=0)
     try:
@@ -1778,14 +1784,14 @@ def test_the_rim_seen_edge_on_is_not_missed_by_agreeing_samples(renderer_for):
     w, h = 320, 180
     glass = next(o for o in scene.objects if o.name == "glass")
     top = glass.base[1] + glass.height
-    d = A.corner_directions(scene, w, h)
+    d = estimators.corner_directions(scene, w, h)
     o = np.array(scene.camera.position)
     t = (top - o[1]) / d[..., 1]
     p = o + t[..., None] * d
     radius = np.where(t > 0, np.hypot(p[..., 0], p[..., 2]), np.nan)
-    corners = A._corners(radius)
-    rim = (A._fold(np.logical_or, [c < glass.radius for c in corners])
-           & A._fold(np.logical_or, [c >= glass.radius for c in corners]))
+    corners = footprint.pixel_corners(radius)
+    rim = (footprint.fold(np.logical_or, [c < glass.radius for c in corners])
+           & footprint.fold(np.logical_or, [c >= glass.radius for c in corners]))
     assert rim.sum() > 100
     job = AdaptiveRender(r, w, h, 8, seed=0)
     try:
@@ -1794,7 +1800,7 @@ def test_the_rim_seen_edge_on_is_not_missed_by_agreeing_samples(renderer_for):
         job.release()
     js, is_ = np.nonzero(rim)
     expect = np.zeros((len(js), 3))
-    offsets = A._offsets(256, 7)
+    offsets = adaptive_render._offsets(256, 7)
     for off in offsets:
         o_, d_ = camera_rays(scene, w, h, off)
         expect += trace(scene, o_[js, is_], d_[js, is_])
@@ -1821,7 +1827,7 @@ def test_no_pixel_seen_through_glass_is_left_off_at_one_sample(renderer_for):
     job = AdaptiveRender(r, w, h, 8, seed=0)
     try:
         res = job.run()
-        through_glass = job._cost > A.HEAVY_RAYS
+        through_glass = job._cost > pixel_lists.HEAVY_RAYS
     finally:
         job.release()
     kept_one = through_glass & (res.spp == 1)
@@ -1876,7 +1882,7 @@ def test_queued_draws_are_finished_at_the_bound(renderer_for):
     sampler.ctx = type("Ctx", (), {"finish": lambda self: finished.append(1)})()
     try:
         sampler.sync_draws = False
-        quarter = A.MAX_QUEUED_FRAGMENTS // 4
+        quarter = footprint.MAX_QUEUED_FRAGMENTS // 4
         counts = []
         for _ in range(6):
             sampler._drawn(quarter)
