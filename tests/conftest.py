@@ -68,6 +68,15 @@ def render(gl):
         r.release()
 
 
+@pytest.fixture(scope="module")
+def api_renderer():
+    """A viewer.Renderer (the public API's, an EGL context of its own) for a module."""
+    import viewer
+
+    with viewer.Renderer("egl") as r:
+        yield r
+
+
 def make_scene(doc: dict, name: str = "test"):
     from viewer.scene.load import scene_from_dict
 
@@ -126,7 +135,7 @@ def xdisplay():
 #: Fixtures that mean a test draws with OpenGL (llvmpipe here) or opens a
 #: real window on an X server; the markers follow from them, so that
 #: `pytest -m "not window"` or `-m "not gl"` selects by what a test needs.
-GL_FIXTURES = {"gl", "render"}
+GL_FIXTURES = {"gl", "render", "api_renderer"}
 WINDOW_FIXTURES = {"xdisplay"}
 
 

@@ -17,8 +17,26 @@ from dataclasses import replace
 from importlib import resources
 from pathlib import Path
 from typing import Any
-from .model import Camera, Checker, DEFAULT_SCENE_NAME, Light, MAX_LIGHTS, MAX_MATERIALS, MAX_OBJECTS, MAX_TRANSPARENT_OBJECTS, Material, RenderSettings, SCENES_PACKAGE, Scene, SceneError, SceneObject, Sky
+
+from ..base.imageio import ImageReadError, read_sky_image
 from ..base.text import _is_control, printable
+from .model import (
+    DEFAULT_SCENE_NAME,
+    MAX_LIGHTS,
+    MAX_MATERIALS,
+    MAX_OBJECTS,
+    MAX_TRANSPARENT_OBJECTS,
+    SCENES_PACKAGE,
+    Camera,
+    Checker,
+    Light,
+    Material,
+    RenderSettings,
+    Scene,
+    SceneError,
+    SceneObject,
+    Sky,
+)
 
 Vec3 = tuple[float, float, float]
 
@@ -275,8 +293,6 @@ def _sky(ctx: _Ctx, t: dict, base_dir: Path | None) -> Sky:
             # what pathlib does not take for "no such file": a name too long
             # for the file system, a folder on the way that cannot be searched
             raise ctx.fail("sky.image", f"{shown}: cannot read: {e.strerror or e}") from None
-        from ..base.imageio import ImageReadError, read_sky_image   # (imageio imports this module)
-
         try:
             read_sky_image(p)
         except ImageReadError as e:
@@ -508,6 +524,16 @@ def load_scene(spec: str | os.PathLike | None = None) -> Scene:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as e:
         raise SceneError(f"{source}: not UTF-8 text ({e.reason} at byte {e.start})") from None
+    scene = scene_from_toml(text, source=source, base_dir=path.parent.resolve(), default_name=path.stem)
+    scene.path = path
+    return scene
+
+
+def scene_from_toml(text: str, source: str = "<TOML text>", base_dir: Path | None = None,
+                    default_name: str = "scene") -> Scene:
+    """Parse and validate a scene's TOML text (raises SceneError, its
+    message starting with `source`).  A relative sky.image is resolved
+    against base_dir (the current folder when None)."""
     # A leading byte order mark (Windows Notepad writes one) marks the text as
     # UTF-8; it is no part of the TOML (toml-test accepts it), and tomllib
     # would reject it as "Invalid statement (at line 1, column 1)", an
@@ -517,8 +543,7 @@ def load_scene(spec: str | os.PathLike | None = None) -> Scene:
         data = tomllib.loads(text)
     except (ValueError, RecursionError) as e:  # TOMLDecodeError; an integer too long to convert; deep nesting
         raise SceneError(f"{source}: not valid TOML: {e}") from None
-    scene = scene_from_dict(data, source=source, base_dir=path.parent.resolve(), default_name=path.stem)
-    scene.path = path
+    scene = scene_from_dict(data, source=source, base_dir=base_dir, default_name=default_name)
     scene.source = source
     return scene
 
