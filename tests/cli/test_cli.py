@@ -331,7 +331,7 @@ def test_output_write_is_atomic(tmp_path, monkeypatch):
     # A failing write (simulated at the rename) leaves the old file untouched
     # and no temporary file behind.
     from viewer.base import imageio
-    from viewer.scene import model as scene_mod
+    from viewer.base import files
 
     out = tmp_path / "img.npy"
     out.write_bytes(b"precious")
@@ -339,7 +339,7 @@ def test_output_write_is_atomic(tmp_path, monkeypatch):
     def boom(*a, **k):
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr(scene_mod.os, "replace", boom)
+    monkeypatch.setattr(files.os, "replace", boom)
     with pytest.raises(OSError):
         imageio.write_image(out, np.zeros((2, 2, 3), np.float32))
     assert out.read_bytes() == b"precious"
@@ -401,7 +401,7 @@ def test_osmesa_backend_renders_the_same_image(tmp_path):
 def test_ctrl_c_ends_a_long_render_cleanly(tmp_path, delay):
     # At 1 s the shaders are being compiled (Mesa's shader cache is off, so
     # they really are): a Ctrl-C there crashed llvmpipe (SIGSEGV) before
-    # viewer/interrupt.py deferred it to the next draw call; at 4 s it is
+    # viewer/base/interrupt.py deferred it to the next draw call; at 4 s it is
     # rendering.  Another run once took 47 s to stop: Python had left the
     # signal to a BLAS thread.
     import signal

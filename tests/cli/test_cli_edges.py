@@ -267,12 +267,12 @@ def test_light_position_without_a_point_light_names_the_scene_file(tmp_path):
 @pytest.fixture
 def no_rendering(monkeypatch):
     """Any attempt to render (an OpenGL context) fails the test."""
-    from viewer.gpu import context
+    from viewer import api
 
     def refuse(*a, **k):
         raise AssertionError("rendered before the output was checked")
 
-    monkeypatch.setattr(context, "create_offscreen_context", refuse)
+    monkeypatch.setattr(api, "create_offscreen_context", refuse)   # the name render's Renderer makes its context with
 
 
 @pytest.mark.parametrize("make, says", [

@@ -19,6 +19,11 @@ import pytest
 
 from conftest import make_scene, no_matplotlib_env
 from viewer.measure import bench
+from viewer.cli import bench as cli_bench
+from viewer.measure import bench_report
+from viewer.measure import kit
+from viewer.measure import plots
+from viewer.measure import sweep
 
 
 # ---------------------------------------------------------------- Pareto front
@@ -29,7 +34,7 @@ def test_pareto_known_front():
     # (same time, more error), g duplicates d exactly (neither dominates).
     pts = {"a": (1.0, 10.0), "b": (2.0, 5.0), "c": (3.0, 6.0), "d": (4.0, 1.0),
            "e": (5.0, 1.0), "f": (1.0, 12.0), "g": (4.0, 1.0)}
-    mask = bench.pareto_mask([p[0] for p in pts.values()], [p[1] for p in pts.values()])
+    mask = sweep.pareto_mask([p[0] for p in pts.values()], [p[1] for p in pts.values()])
     front = {k for k, m in zip(pts, mask) if m}
     assert front == {"a", "b", "d", "g"}
 
@@ -37,7 +42,7 @@ def test_pareto_known_front():
 def test_pareto_front_is_non_dominated_and_complete():
     rng = np.random.default_rng(3)
     t, e = rng.random(200), rng.random(200)
-    mask = bench.pareto_mask(t, e)
+    mask = sweep.pareto_mask(t, e)
     for i in range(len(t)):
         dominated = any(t[j] <= t[i] and e[j] <= e[i] and (t[j] < t[i] or e[j] < e[i]) for j in range(len(t)))
         assert mask[i] == (not dominated)
@@ -47,23 +52,23 @@ def test_pareto_front_is_non_dominated_and_complete():
 
 
 def test_pareto_single_point():
-    assert bench.pareto_mask([5.0], [0.1]) == [True]
+    assert sweep.pareto_mask([5.0], [0.1]) == [True]
 
 
 def test_pareto_with_tolerances():
     # b is 2% faster than a with the same error: dominates a exactly, a tie within 5%
     t, e = [100.0, 98.0], [0.5, 0.5]
-    assert bench.pareto_mask(t, e) == [False, True]
-    assert bench.pareto_mask(t, e, time_tol=0.05) == [True, True]
+    assert sweep.pareto_mask(t, e) == [False, True]
+    assert sweep.pareto_mask(t, e, time_tol=0.05) == [True, True]
     # within the time tolerance, a lower error still wins: c (3% slower, error 10% lower) dominates a
     t, e = [100.0, 103.0], [0.5, 0.45]
-    assert bench.pareto_mask(t, e, time_tol=0.05, error_tol=1e-4) == [False, True]
+    assert sweep.pareto_mask(t, e, time_tol=0.05, error_tol=1e-4) == [False, True]
     # errors equal to float rounding are a tie: neither dominates
     t, e = [100.0, 101.0], [0.5, 0.5 * (1 + 1e-6)]
-    assert bench.pareto_mask(t, e, time_tol=0.05, error_tol=1e-4) == [True, True]
+    assert sweep.pareto_mask(t, e, time_tol=0.05, error_tol=1e-4) == [True, True]
     # far faster and worse: both on the front, with or without tolerances
-    assert bench.pareto_mask([10.0, 100.0], [1.0, 0.1], 0.05, 1e-4) == [True, True]
-    assert bench.dominates(1.0, 1.0, 2.0, 2.0) and not bench.dominates(2.0, 2.0, 1.0, 1.0)
+    assert sweep.pareto_mask([10.0, 100.0], [1.0, 0.1], 0.05, 1e-4) == [True, True]
+    assert sweep.dominates(1.0, 1.0, 2.0, 2.0) and not sweep.dominates(2.0, 2.0, 1.0, 1.0)
 
 
 # ---------------------------------------------------------------- error metrics
@@ -189,17 +194,17 @@ def test_adaptive_setting_with_huge_target_is_one_centred_sample(gl, monkeypatch
     pixel and the image of a 1-sample uniform render (the reference passed
     in here, from Renderer.render: RMSE and max error 0).  The warm-up and
     every timed render of an adaptive setting go through render_adaptive."""
-    import viewer.adaptive.sampler
+    import viewer.adaptive.render
     from viewer.gpu.renderer import Renderer
 
     calls = []
-    real = viewer.adaptive.render_adaptive
+    real = viewer.adaptive.render.render_adaptive
 
     def counting(renderer, width, height, samples, target_error, seed=0, **kw):
         calls.append((width, height, samples, target_error, seed))
         return real(renderer, width, height, samples, target_error, seed=seed, **kw)
 
-    monkeypatch.setattr(viewer.adaptive, "render_adaptive", counting)
+    monkeypatch.setattr(bench, "render_adaptive", counting)     # the name bench renders through
 
     w, h = 12, 8
     scene = make_scene(_FLAT_FLOOR, "flat-floor")
@@ -217,7 +222,7 @@ def test_adaptive_setting_with_huge_target_is_one_centred_sample(gl, monkeypatch
     # warm-up renders (until one compiles nothing) and 2 timed renders each, at the bench's seed
     assert set(calls) == {(w, h, 4, 1e9, bench.RENDER_SEED), (w, h, 4, 1e-6, bench.RENDER_SEED)}
     for target in (1e9, 1e-6):
-        assert 1 + 2 <= sum(c[3] == target for c in calls) <= bench.WARM_UP_RENDERS + 2
+        assert 1 + 2 <= sum(c[3] == target for c in calls) <= kit.WARM_UP_RENDERS + 2
     res = {x.setting.label: x for x in results}
     assert res["adaptive huge"].mean_spp == 1.0
     assert res["adaptive huge"].errors["rmse"] == 0.0 and res["adaptive huge"].errors["max_abs"] == 0.0
@@ -227,7 +232,7 @@ def test_adaptive_setting_with_huge_target_is_one_centred_sample(gl, monkeypatch
     assert 1.0 < res["adaptive tight"].mean_spp <= 4.0
     for x in results:
         assert len(x.times) == len(x.cpu_times) == 2 and min(x.times) > 0
-    rows = [bench._row(x) for x in results]
+    rows = [bench_report._row(x) for x in results]
     assert [row["mean_spp"] for row in rows][:2] == ["4", "1.0000"]
     assert [row["adaptive_target"] for row in rows] == ["", "1e+09", "1e-06"]
 
@@ -247,7 +252,7 @@ def test_adaptive_setting_on_a_real_scene_at_one_sample_budget(gl):
     finally:
         r.release()
     base = bench.sweep(scene)[0]
-    st = bench.Setting(bench.adaptive_label(0.005, 1), base.max_depth, 1, base.min_weight, adaptive=0.005)
+    st = bench.Setting(sweep.adaptive_label(0.005, 1), base.max_depth, 1, base.min_weight, adaptive=0.005)
     [res] = bench.bench_scene(gl, scene, "glass-sphere", [st], w, h, 1, one)
     assert res.mean_spp == 1.0 and res.errors["max_abs"] == 0.0
 
@@ -268,16 +273,16 @@ def test_adaptive_front_summary():
     assert front == {"default", "samples=4", "adaptive e=0.005 spp<=16"}
     assert res[1].front_uniform["wall"] is True and res[3].front_uniform["wall"] is None
     assert bench.adaptive_on_front(res) == {"wall": ["adaptive e=0.005 spp<=16"], "cpu": ["adaptive e=0.005 spp<=16"]}
-    lines = bench.adaptive_summary(res)
+    lines = bench_report.adaptive_summary(res)
     assert len(lines) == 2
     assert "on the Pareto front: adaptive e=0.005 spp<=16" in lines[0] and "samples=32" in lines[0]
     # without the good adaptive point: none on the front
     res = [r for r in res if r.setting.label != "adaptive e=0.005 spp<=16"]
     bench.mark_fronts(res)
     assert bench.adaptive_on_front(res) == {"wall": [], "cpu": []}
-    assert all("no adaptive setting on the Pareto front" in line for line in bench.adaptive_summary(res))
+    assert all("no adaptive setting on the Pareto front" in line for line in bench_report.adaptive_summary(res))
     # a sweep without adaptive settings says nothing about them
-    assert bench.adaptive_on_front(res[:3]) is None and bench.adaptive_summary(res[:3]) == []
+    assert bench.adaptive_on_front(res[:3]) is None and bench_report.adaptive_summary(res[:3]) == []
     table = bench.scene_table(res, "s")
     assert "mean spp" in table.splitlines()[2]
     cells = {c[0]: c for c in ([x.strip() for x in line.split("|")[1:-1]] for line in table.splitlines()[4:])}
@@ -292,7 +297,7 @@ def test_csv_columns_are_documented():
     m = re.search(r"`results\.csv` \((.*?)\), `results\.md`", section, re.S)
     assert m, "README: the results.csv paragraph"
     documented = tuple(re.findall(r"`([a-z_0-9]+)`", m.group(1)))
-    assert documented == bench.CSV_COLUMNS
+    assert documented == bench_report.CSV_COLUMNS
 
 
 # ---------------------------------------------------------------- end to end
@@ -316,7 +321,7 @@ def test_bench_end_to_end(quick_run):
     assert proc.returncode == 0, proc.stderr
     with open(out / "results.csv", newline="") as f:
         reader = csv.DictReader(f)
-        assert tuple(reader.fieldnames) == bench.CSV_COLUMNS
+        assert tuple(reader.fieldnames) == bench_report.CSV_COLUMNS
         rows = list(reader)
     assert {r["scene"] for r in rows} == {"default", "bench-opaque"}
     labels = {r["setting"] for r in rows}
@@ -347,7 +352,7 @@ def test_bench_end_to_end(quick_run):
         assert sum(int(r["is_default"]) for r in sub) == 1
         # the pareto columns are exactly the non-dominated sets of (time, rmse), per clock
         for clock, col in (("wall", "time_ms"), ("cpu", "cpu_ms")):
-            mask = bench.pareto_mask([float(r[col]) for r in sub], [float(r["rmse"]) for r in sub],
+            mask = sweep.pareto_mask([float(r[col]) for r in sub], [float(r["rmse"]) for r in sub],
                                      bench.DEFAULT_TIME_TOLERANCE, bench.DEFAULT_ERROR_TOLERANCE)
             assert [bool(int(r[f"pareto_{clock}"])) for r in sub] == mask, clock
         # the same image whichever shader: specialised and generic agree
@@ -393,7 +398,7 @@ def test_bench_reuses_cached_reference(quick_run, tmp_path):
 
 def test_plot_without_matplotlib(monkeypatch, tmp_path):
     monkeypatch.setitem(sys.modules, "matplotlib", None)   # import matplotlib -> ImportError
-    assert bench.plot(tmp_path / "p.png", {}, {}, "") is False
+    assert plots.pareto_plot(tmp_path / "p.png", {}, {}, "") is False
     assert not (tmp_path / "p.png").exists()
 
 
@@ -430,7 +435,9 @@ def test_reference_falls_back_to_the_gpu(gl, monkeypatch, tmp_path):
     """Without viewer.reference the bench still runs, on a converged GPU render."""
     from viewer.scene.load import load_scene
 
-    monkeypatch.setattr(bench, "reference_kind", lambda: "gpu")
+    from viewer.measure import reference_cache
+
+    monkeypatch.setattr(reference_cache, "reference_kind", lambda: "gpu")
     scene = load_scene("glass-sphere")
     img, kind, cached = bench.reference_image(scene, "glass-sphere", 16, 9, 2, tmp_path, ctx=gl)
     assert kind == "gpu" and not cached
@@ -442,7 +449,7 @@ def test_reference_falls_back_to_the_gpu(gl, monkeypatch, tmp_path):
 
 
 def test_time_axis_labels_plain_numbers_that_do_not_collide():
-    """bench.ms_axis: a log axis of 15 to 600 ms (bench-opaque's span) is
+    """plots.ms_axis: a log axis of 15 to 600 ms (bench-opaque's span) is
     labelled 20, 50, 100, 200 and 500 and nothing else; matplotlib's own
     labelling put a scientific label on every minor tick there, and they
     ran into each other (docs/bench-pareto.png before)."""
@@ -450,7 +457,7 @@ def test_time_axis_labels_plain_numbers_that_do_not_collide():
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from viewer.measure.bench import ms_axis
+    from viewer.measure.plots import ms_axis
 
     fig, ax = plt.subplots()
     try:
@@ -580,7 +587,7 @@ def test_warm_up_stops_when_nothing_is_built_and_gives_up_at_the_limit():
         r.programs_built += 1
         return len(calls)
 
-    assert bench.warm_up(r, always) == bench.WARM_UP_RENDERS == len(calls)
+    assert bench.warm_up(r, always) == kit.WARM_UP_RENDERS == len(calls)
 
 
 # ---------------------------------------------------------------- outputs (audit)
@@ -641,21 +648,21 @@ def test_bench_unwritable_result_names_the_file_and_keeps_the_tables(monkeypatch
     import argparse
     import errno
 
-    import viewer.scene.model
+    from viewer.base import files
 
-    real = viewer.scene._write_temp      # what every atomic write writes through
+    real = files._write_temp      # what every atomic write writes through
 
     def full_disk(folder, name, data, mode):
         if name == "results.md":
             raise OSError(errno.ENOSPC, "No space left on device")
         return real(folder, name, data, mode)
 
-    monkeypatch.setattr(viewer.scene, "_write_temp", full_disk)
+    monkeypatch.setattr(files, "_write_temp", full_disk)
     p = argparse.ArgumentParser()
-    bench.add_arguments(p)
+    cli_bench.add_arguments(p)
     p.add_argument("--debug", action="store_true")
     args = p.parse_args(["glass-sphere", "--quick", "--size", "8x8", "--repeat", "1", "--out", str(tmp_path)])
-    assert bench.run(args) == 1
+    assert cli_bench.run(args) == 1
     cap = capsys.readouterr()
     assert f"{tmp_path / 'results.md'}: cannot write: No space left on device" in cap.err
     assert "### glass-sphere" in cap.out
@@ -681,7 +688,7 @@ def test_a_run_that_cannot_write_one_file_leaves_the_earlier_runs_files_all_as_t
     # results.csv and results.md used to be the new run's while machine.json
     # and the plots stayed the old run's (the exit status said 1)
     from viewer.cli import commands as cli
-    from viewer.scene import model as scene_module
+    from viewer.base import files as files_module
 
     out = tmp_path / "out"
     assert _bench("bench-opaque", "--quick", "--size", "8x8", "--repeat", "1", "--out", str(out)).returncode == 0
@@ -689,7 +696,7 @@ def test_a_run_that_cannot_write_one_file_leaves_the_earlier_runs_files_all_as_t
     assert {"results.csv", "results.md", "machine.json"} <= set(before)
     real = os.access
     blocked = out / "machine.json"       # read-only as a plain open() would find it (root passes os.access)
-    monkeypatch.setattr(scene_module.os, "access", lambda p, mode: False if Path(p) == blocked else real(p, mode))
+    monkeypatch.setattr(files_module.os, "access", lambda p, mode: False if Path(p) == blocked else real(p, mode))
     assert cli.main(["bench", "glass-sphere", "--quick", "--size", "12x6", "--repeat", "1", "--out", str(out)]) == 1
     assert "machine.json: cannot write" in capsys.readouterr().err
     after = _files(out)

@@ -1,4 +1,4 @@
-"""The physically based peer (viewer/peer.py): which scenes qualify, the
+"""The physically based peer (viewer/measure/peer.py): which scenes qualify, the
 conventions of the conversion (camera, pixel filter, checker, dielectric,
 sky) against the float64 reference, and ``glassray bench --peer mitsuba``
 end to end.  Skipped where Mitsuba 3 is not installed (pip install
@@ -6,7 +6,6 @@ end to end.  Skipped where Mitsuba 3 is not installed (pip install
 
 from __future__ import annotations
 
-import copy
 import csv
 import json
 import subprocess
@@ -21,6 +20,9 @@ from viewer.measure import peer  # noqa: E402
 from viewer.reference.trace import render_reference  # noqa: E402
 from viewer.scene.load import load_scene, scene_from_dict, with_overrides
 from viewer.scene.save import scene_to_toml  # noqa: E402
+from viewer.measure import peer_check
+from viewer.measure import peer_mitsuba
+from viewer.measure import peer_report
 
 import tomllib  # noqa: E402
 
@@ -37,13 +39,13 @@ def _whitted() -> dict:
 
 
 def test_whitted_exact_qualifies():
-    assert peer.reasons(load_scene("whitted-exact")) == []
-    peer.check_scene(load_scene("whitted-exact"))
+    assert peer_check.reasons(load_scene("whitted-exact")) == []
+    peer_check.check_scene(load_scene("whitted-exact"))
 
 
 def test_default_scene_is_rejected_with_every_reason():
-    with pytest.raises(peer.PeerError) as e:
-        peer.check_scene(load_scene("default"))
+    with pytest.raises(peer_check.PeerError) as e:
+        peer_check.check_scene(load_scene("default"))
     msg = str(e.value)
     assert msg.count("\n") == 0
     assert "cannot be compared with a physically based renderer" in msg
@@ -70,11 +72,11 @@ def test_non_qualifying_scenes_are_rejected(change, expected):
     d = _whitted()
     change(d)
     scene = scene_from_dict(d, "changed.toml")
-    with pytest.raises(peer.PeerError, match="cannot be compared") as e:
-        peer.check_scene(scene)
+    with pytest.raises(peer_check.PeerError, match="cannot be compared") as e:
+        peer_check.check_scene(scene)
     assert expected in str(e.value)
-    with pytest.raises(peer.PeerError):
-        peer.scene_dict(scene, 8, 8)
+    with pytest.raises(peer_check.PeerError):
+        peer_mitsuba.scene_dict(scene, 8, 8)
 
 
 _GLASS_BOX = {"type": "box", "min": [1.2, 0.0, -0.3], "max": [1.8, 0.6, 0.3], "material": "glass"}
@@ -105,7 +107,7 @@ def test_flat_faces_lying_on_each_other_are_refused(objects, touching):
     d = _whitted()
     d["objects"][1]["center"] = [-1.0, 0.7, 0.0]
     d["objects"] += objects
-    why = [w for w in peer.reasons(scene_from_dict(d, "faces.toml")) if "a flat face" in w]
+    why = [w for w in peer_check.reasons(scene_from_dict(d, "faces.toml")) if "a flat face" in w]
     assert bool(why) == touching, why
     if touching:
         assert "objects[2]" in why[0]
@@ -113,18 +115,18 @@ def test_flat_faces_lying_on_each_other_are_refused(objects, touching):
 
 def test_clip_area_of_convex_polygons():
     sq = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], float)
-    assert peer._clip_area(sq, sq + [0.5, 0.25]) == pytest.approx(0.375)
-    assert peer._clip_area(sq, (sq + [1.0, 0])[::-1]) == pytest.approx(0.0)    # an edge, either winding
+    assert peer_check._clip_area(sq, sq + [0.5, 0.25]) == pytest.approx(0.375)
+    assert peer_check._clip_area(sq, (sq + [1.0, 0])[::-1]) == pytest.approx(0.0)    # an edge, either winding
     tri = np.array([[0, 0], [2, 0], [0, 2]], float)
-    assert peer._clip_area(sq, tri) == pytest.approx(1.0)
-    assert peer._clip_area(tri, sq * 3 - 0.5) == pytest.approx(2.0)
+    assert peer_check._clip_area(sq, tri) == pytest.approx(1.0)
+    assert peer_check._clip_area(tri, sq * 3 - 0.5) == pytest.approx(2.0)
 
 
 def test_lights_alone_do_not_disqualify():
     # a light lights nothing when every material's Phong terms are 0
     d = _whitted()
     d["lights"] = [{"position": [2, 5, 3]}]
-    assert peer.reasons(scene_from_dict(d, "lit.toml")) == []
+    assert peer_check.reasons(scene_from_dict(d, "lit.toml")) == []
 
 
 def test_bench_peer_rejects_a_scene_with_one_clear_message(tmp_path):
@@ -158,14 +160,14 @@ def test_bad_peer_time_limit_is_bad_usage(tmp_path, value):
 
 def test_time_to_error_interpolates_log_log_and_never_extrapolates():
     pts = _pts([(10.0, 0.4), (20.0, 0.2), (40.0, 0.1)])
-    t, flag = peer.time_to_error(pts, 0.2 / np.sqrt(2))      # halfway in log error -> halfway in log time
+    t, flag = peer_report.time_to_error(pts, 0.2 / np.sqrt(2))      # halfway in log error -> halfway in log time
     assert flag == "" and t == pytest.approx(np.sqrt(20.0 * 40.0))
-    assert peer.time_to_error(pts, 0.2) == (pytest.approx(20.0), "")
-    assert peer.time_to_error(pts, 0.05) == (None, "not reached")
-    assert peer.time_to_error(pts, 0.5) == (10.0, "<=")       # only a bound
+    assert peer_report.time_to_error(pts, 0.2) == (pytest.approx(20.0), "")
+    assert peer_report.time_to_error(pts, 0.05) == (None, "not reached")
+    assert peer_report.time_to_error(pts, 0.5) == (10.0, "<=")       # only a bound
     # the first crossing counts, even when noise brings the error back up later
     pts = _pts([(10.0, 0.4), (20.0, 0.15), (40.0, 0.25), (80.0, 0.1)])
-    assert peer.time_to_error(pts, 0.2)[0] < 20.0
+    assert peer_report.time_to_error(pts, 0.2)[0] < 20.0
 
 
 # ---------------------------------------------------------------- conventions against the reference
@@ -271,8 +273,8 @@ def test_converged_mitsuba_matches_the_reference_within_noise(name):
 
 def test_scene_dict_conventions():
     scene = load_scene("whitted-exact")
-    peer.select_variant()
-    d = peer.scene_dict(scene, 32, 18)
+    peer_mitsuba.select_variant()
+    d = peer_mitsuba.scene_dict(scene, 32, 18)
     s = d["sensor"]
     assert s["fov_axis"] == "y" and s["fov"] == 40.0
     assert s["film"]["rfilter"] == {"type": "box"}

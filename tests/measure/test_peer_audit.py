@@ -1,4 +1,4 @@
-"""Audit of the physically based peer (viewer/peer.py, ``glassray bench
+"""Audit of the physically based peer (viewer/measure/peer.py, ``glassray bench
 --peer mitsuba``): that Mitsuba runs at its best (no wasted work the image
 does not need), the conventions on features the two built-in scenes do not
 use (mirrors, exposure, a turned glass box, an upright glass cylinder and its
@@ -11,7 +11,6 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
-import tomllib
 
 import numpy as np
 import pytest
@@ -21,7 +20,8 @@ mi = pytest.importorskip("mitsuba")
 from viewer.measure import peer  # noqa: E402
 from viewer.reference.trace import render_reference  # noqa: E402
 from viewer.scene.load import load_scene, scene_from_dict, with_overrides
-from viewer.scene.save import scene_to_toml  # noqa: E402
+from viewer.measure import peer_check
+from viewer.measure import peer_mitsuba
 
 
 def _shapes(name: str, w: int = 16, h: int = 9):
@@ -53,15 +53,15 @@ def test_black_delta_bsdf_draws_the_same_image_as_black_diffuse(monkeypatch):
     """The fix changes no pixel: the shadow rays it saves contributed 0."""
     scene = load_scene("whitted-glass")
     new = peer.MitsubaPeer(scene, 40, 24).render(16, seed=3)
-    orig = peer._material_parts
+    orig = peer_mitsuba._material_parts
 
     def diffuse(m, checker_uv):
         out = orig(m, checker_uv)
-        if out["bsdf"] == peer.BLACK_BSDF:
+        if out["bsdf"] == peer_mitsuba.BLACK_BSDF:
             out["bsdf"] = {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.0, 0.0, 0.0]}}
         return out
 
-    monkeypatch.setattr(peer, "_material_parts", diffuse)
+    monkeypatch.setattr(peer_mitsuba, "_material_parts", diffuse)
     old = peer.MitsubaPeer(scene, 40, 24).render(16, seed=3)
     np.testing.assert_array_equal(new, old)
 
@@ -117,7 +117,7 @@ def test_mirrors_exposure_boxes_cylinders_and_a_short_max_depth_match_the_refere
     Mitsuba equals the reference within the noise (measured 0.97x the
     prediction at 48x27; a max_depth one off gives several times it)."""
     scene = scene_from_dict(_features(3), "features.toml")
-    assert peer.reasons(scene) == []
+    assert peer_check.reasons(scene) == []
     rmse, expected = _mitsuba_vs_reference(scene)
     assert rmse < 1.25 * expected, (rmse, expected)
     # the check can see a max_depth one off
@@ -130,7 +130,7 @@ def test_a_shaded_mirror_is_refused():
     equivalent here."""
     d = _features(3)
     d["materials"]["mirror"].update(specular=0.5, shininess=50)
-    why = peer.reasons(scene_from_dict(d, "shaded.toml"))
+    why = peer_check.reasons(scene_from_dict(d, "shaded.toml"))
     assert any("objects[1]" in w and "Phong terms" in w for w in why), why
 
 

@@ -1,4 +1,4 @@
-"""Quality by error budget (viewer/quality.py, ``glassray render --max-error``):
+"""Quality by error budget (viewer/measure/quality.py, ``glassray render --max-error``):
 the pick on synthetic measurements, the measuring layout, the cache (round
 trip, corruption, keys) and the command end to end on a tiny image."""
 
@@ -8,7 +8,6 @@ import json
 import os
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,6 +15,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from viewer.measure import quality as q
+from viewer.measure import quality_cache
+from viewer.measure import quality_grid
 
 from conftest import make_scene
 
@@ -88,7 +89,7 @@ def test_a_larger_budget_never_gives_a_slower_pick(points, e1, e2):
 
 def test_explicit_settings_fix_their_axis_of_the_grid():
     full = q.candidate_grid()
-    assert len(full) == len(q.SAMPLES) * len(q.TRACE) and 10 <= len(full) <= 20
+    assert len(full) == len(quality_grid.SAMPLES) * len(quality_grid.TRACE) and 10 <= len(full) <= 20
     assert {c.samples for c in q.candidate_grid(samples=4)} == {4}
     g = q.candidate_grid(max_depth=3)
     assert {c.max_depth for c in g} == {3} and len(g) == len(full)
@@ -112,7 +113,7 @@ def test_bad_budgets_are_rejected():
 def test_layout_spreads_tiles_over_the_whole_image(size):
     W, H = size
     lay = q.layout(W, H)
-    assert len(lay.tiles) == q.GRID ** 2
+    assert len(lay.tiles) == quality_grid.GRID ** 2
     assert 0.7 * q.MEASURE_PIXELS <= lay.pixels <= 1.3 * q.MEASURE_PIXELS
     seen = np.zeros((H, W), bool)
     for (x, y, w, h), (px, py) in zip(lay.tiles, lay.packed):
@@ -121,15 +122,15 @@ def test_layout_spreads_tiles_over_the_whole_image(size):
         seen[y:y + h, x:x + w] = True
         assert px + w <= lay.size[0] and py + h <= lay.size[1]
     # one tile in each cell of the grid
-    cells = {(int((x + w / 2) * q.GRID // W), int((y + h / 2) * q.GRID // H)) for x, y, w, h in lay.tiles}
-    assert len(cells) == q.GRID ** 2
+    cells = {(int((x + w / 2) * quality_grid.GRID // W), int((y + h / 2) * quality_grid.GRID // H)) for x, y, w, h in lay.tiles}
+    assert len(cells) == quality_grid.GRID ** 2
     tw, th = lay.timing_size
-    if W * H <= q.FULL_TIMING_PIXELS:
+    if W * H <= quality_grid.FULL_TIMING_PIXELS:
         assert (tw, th) == (W, H)            # timed at its own size: no fixed cost scaled up
     else:
         # about FULL_TIMING_PIXELS of the image's shape: a pass's fixed cost
         # stays small against its pixels' (at the mosaic's size it was not)
-        assert abs(tw / th - W / H) < 0.05 * W / H and abs(tw * th - q.FULL_TIMING_PIXELS) < 0.05 * q.FULL_TIMING_PIXELS
+        assert abs(tw / th - W / H) < 0.05 * W / H and abs(tw * th - quality_grid.FULL_TIMING_PIXELS) < 0.05 * quality_grid.FULL_TIMING_PIXELS
     assert q.layout(W, H) == lay  # deterministic
     small = q.layout(100, 60)
     assert small.tiles == ((0, 0, 100, 60),) and small.size == small.timing_size == (100, 60)
@@ -177,13 +178,13 @@ def make_scene_from_toml():
 @pytest.fixture
 def cache_root(tmp_path, monkeypatch):
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
-    monkeypatch.setattr(q, "_WARNED", set())
+    monkeypatch.setattr(quality_cache, "_WARNED", set())
     return tmp_path / "xdg" / "glassray" / "quality"
 
 
 def test_measure_cache_round_trip_and_corruption(gl, cache_root, capsys):
     scene = make_scene_from_toml()
-    assert q.cache_dir() == cache_root
+    assert quality_cache.cache_dir() == cache_root
     meas, cache, cands = q.prepare(gl, scene, 64, 36)
     assert meas.todo == cands and not meas.done
     steps = 0
@@ -209,10 +210,10 @@ def test_measure_cache_round_trip_and_corruption(gl, cache_root, capsys):
 
     # a value off the grid is measured against the cached reference and added
     meas3, cache3, cands3 = q.prepare(gl, scene, 64, 36, samples=3)
-    assert [c.samples for c in meas3.todo] == [3] * len(q.TRACE) and meas3.reference is not None
+    assert [c.samples for c in meas3.todo] == [3] * len(quality_grid.TRACE) and meas3.reference is not None
     meas3.run()
     q.finish(meas3, cache3, cands3, 0.05)
-    assert len(json.loads(cache3.path.read_text())["measured"]) == len(cands) + len(q.TRACE)
+    assert len(json.loads(cache3.path.read_text())["measured"]) == len(cands) + len(quality_grid.TRACE)
 
     # corrupt file: warned about once, measured again, rewritten
     for garbage in ("{not json", json.dumps({"format": 1, "key": {}, "measured": {}})):
@@ -247,31 +248,13 @@ def test_cache_key_follows_what_the_error_depends_on(gl, cache_root):
     assert stem not in stems and len(stems) == 4
 
 
-def test_cache_key_follows_the_code_that_decides_pixels(gl, cache_root, tmp_path, monkeypatch):
-    import shutil
-
-    import viewer
-
-    package = Path(viewer.__file__).resolve().parent
-    copy = tmp_path / "viewer"
-    shutil.copytree(package, copy, ignore=shutil.ignore_patterns("__pycache__"))
-    assert q._code_digest(copy) == q._code_digest()
-    # a window-only module is not part of it ...
-    (copy / "app.py").write_text((copy / "app.py").read_text() + "\n# an edit\n")
-    assert q._code_digest(copy) == q._code_digest()
-    # ... every module that decides pixels or times is
-    digests = set()
-    for name in q.CODE_MODULES:
-        original = (copy / f"{name}.py").read_text()
-        (copy / f"{name}.py").write_text(original + "\n# an edit\n")
-        digests.add(q._code_digest(copy))
-        (copy / f"{name}.py").write_text(original)
-    assert q._code_digest() not in digests and len(digests) == len(q.CODE_MODULES)
-    # and the key's stem follows the digest
+def test_cache_key_follows_the_code_digest(gl, cache_root, monkeypatch):
+    """The key's stem follows the digest of the measured code (which
+    modules that covers: tests/measure/test_cache_identity.py)."""
     scene = make_scene_from_toml()
     lay = q.layout(64, 36)
     stem = q.make_key(gl, scene, lay).stem()
-    monkeypatch.setattr(q, "_code_digest", lambda package=None: "another")
+    monkeypatch.setattr(quality_cache, "_code_digest", lambda package=None: "another")
     assert q.make_key(gl, scene, lay).stem() != stem
 
 

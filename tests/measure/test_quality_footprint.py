@@ -13,6 +13,9 @@ import numpy as np
 import pytest
 
 from viewer.measure import quality as q
+from viewer.measure import kit
+from viewer.measure import quality_cache
+from viewer.measure import quality_measure
 
 from conftest import make_scene
 
@@ -96,15 +99,15 @@ def test_candidates_and_reference_are_what_render_draws(gl, renderer):
     lay = q.layout(W, H, pixels=1500, grid=4)
     assert len(lay.tiles) == 16
     ref_r = renderer(with_overrides(scene, max_depth=REFERENCE_MAX_DEPTH, min_weight=REFERENCE_MIN_WEIGHT))
-    half = q.REFERENCE_SAMPLES // 2
+    half = quality_measure.REFERENCE_SAMPLES // 2
     a = ref_r.render(W, H, half, REFERENCE_SEED)
     b = ref_r.render(W, H, half, REFERENCE_SEED + 1)
     want_ref = mosaic_of((a.astype(np.float64) + b) / 2, lay)
     cand_r = renderer(scene)
-    img4, img1 = cand_r.render(W, H, 4, q.RENDER_SEED), cand_r.render(W, H, 1, q.RENDER_SEED)
+    img4, img1 = cand_r.render(W, H, 4, kit.RENDER_SEED), cand_r.render(W, H, 1, kit.RENDER_SEED)
     # the point-sampled image is far from the footprint one here: the test
     # can tell them apart
-    assert rmse(mosaic_of(cand_r.render(W, H, 4, q.RENDER_SEED, footprint=False), lay),
+    assert rmse(mosaic_of(cand_r.render(W, H, 4, kit.RENDER_SEED, footprint=False), lay),
                 mosaic_of(img4, lay)) > 0.005
 
     meas = q.Measurement(gl, scene, lay, [q.Candidate(1, 4, 0.01), q.Candidate(4, 4, 0.01)])
@@ -164,7 +167,7 @@ def test_measurements_of_the_old_method_are_not_reused(gl, tmp_path):
     scene = scene_of("ball")
     lay = q.layout(64, 36)
     key = q.make_key(gl, scene, lay)
-    old = q.Key(key.scene, key.machine, lay, {**key.method, "version": 1}, key.name)
+    old = quality_cache.Key(key.scene, key.machine, lay, {**key.method, "version": 1}, key.name)
     m = q.Measured(q.Candidate(1, 4, 0.01), 1.0, 0.5)
     assert q.Cache(old, tmp_path).save({m.candidate.key(): m}, 0.001)
     assert q.Cache(key, tmp_path).load() == {}

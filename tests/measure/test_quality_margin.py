@@ -1,5 +1,5 @@
 """Quality by error budget holds the measured RMSE plus its standard error
-against the budget (viewer/quality.py, tile_standard_error, pick).  The
+against the budget (viewer/measure/quality.py, tile_standard_error, pick).  The
 measured pixels are a stratified sample of tiles of the image; on the
 default scene at 640x360 the pick for 0.02 against the RMSE alone (2
 samples, 0.0183 measured, a standard error of 0.0026 from the tiles' spread)
@@ -15,6 +15,9 @@ import numpy as np
 import pytest
 
 from viewer.measure import quality as q
+from viewer.measure import kit
+from viewer.measure import quality_cache
+from viewer.measure import quality_measure
 
 from test_quality_footprint import W, H, mosaic_of, renderer, rmse, scene_of  # noqa: F401  (fixture)
 
@@ -47,21 +50,21 @@ def test_tile_standard_error_is_the_spread_of_the_tiles_mean_squared_errors():
     keep = np.ones((mh, mw), bool)
     total = math.sqrt(np.mean(errors ** 2))
     want = np.std(errors ** 2, ddof=1) / 4.0 / (2.0 * total)
-    assert q.tile_standard_error(image, reference, keep, lay, total) == pytest.approx(want, rel=1e-9)
+    assert quality_measure.tile_standard_error(image, reference, keep, lay, total) == pytest.approx(want, rel=1e-9)
     # a tile whose pixels are all left out (cut trees) does not count
     (_x, _y, tw, th), (px, py) = lay.tiles[0], lay.packed[0]
     keep[py:py + th, px:px + tw] = False
     rest = errors[1:]
     total = math.sqrt(np.mean(rest ** 2))
     want = np.std(rest ** 2, ddof=1) / math.sqrt(15) / (2.0 * total)
-    assert q.tile_standard_error(image, reference, keep, lay, total) == pytest.approx(want, rel=1e-9)
+    assert quality_measure.tile_standard_error(image, reference, keep, lay, total) == pytest.approx(want, rel=1e-9)
 
 
 def test_an_image_measured_whole_has_no_standard_error():
     lay = q.layout(64, 36)
     assert len(lay.tiles) == 1
     a = np.zeros((36, 64, 3))
-    assert q.tile_standard_error(a + 0.1, a, np.ones((36, 64), bool), lay, 0.1) == 0.0
+    assert quality_measure.tile_standard_error(a + 0.1, a, np.ones((36, 64), bool), lay, 0.1) == 0.0
 
 
 def test_a_measurement_reports_the_standard_error_of_render_s_pixels_and_caches_it(gl, renderer, tmp_path):  # noqa: F811
@@ -71,10 +74,10 @@ def test_a_measurement_reports_the_standard_error_of_render_s_pixels_and_caches_
     scene = scene_of("ball")
     lay = q.layout(W, H, pixels=1500, grid=4)
     ref_r = renderer(with_overrides(scene, max_depth=REFERENCE_MAX_DEPTH, min_weight=REFERENCE_MIN_WEIGHT))
-    half = q.REFERENCE_SAMPLES // 2
+    half = quality_measure.REFERENCE_SAMPLES // 2
     ref = mosaic_of((ref_r.render(W, H, half, REFERENCE_SEED).astype(np.float64)
                      + ref_r.render(W, H, half, REFERENCE_SEED + 1)) / 2, lay)
-    img = mosaic_of(renderer(scene).render(W, H, 4, q.RENDER_SEED), lay)
+    img = mosaic_of(renderer(scene).render(W, H, 4, kit.RENDER_SEED), lay)
     tiles = [np.mean((img[py:py + th, px:px + tw] - ref[py:py + th, px:px + tw]) ** 2)
              for (_x, _y, tw, th), (px, py) in zip(lay.tiles, lay.packed)]
     total = rmse(img, ref)
@@ -100,7 +103,7 @@ def test_the_truncation_control_variate_measures_the_whole_image(gl, renderer): 
     """Where the mosaic is a part of the image, a candidate's mean squared
     error is the mosaic's, minus the mosaic's part of the squared difference
     of its trace's and the reference trace's centred samples, plus the whole
-    image's (viewer/quality.py, Measurement._run).  Computed here from
+    image's (viewer/measure/quality.py, Measurement._run).  Computed here from
     Renderer.render's images of the whole picture (the route glassray render
     takes), and closer to the whole image's RMSE than the mosaic's own."""
     from viewer.measure.bench import REFERENCE_MAX_DEPTH, REFERENCE_MIN_WEIGHT, REFERENCE_SEED
@@ -108,14 +111,14 @@ def test_the_truncation_control_variate_measures_the_whole_image(gl, renderer): 
 
     scene = scene_of("glass")
     lay = q.layout(W, H, pixels=1500, grid=4)
-    half = q.REFERENCE_SAMPLES // 2
+    half = quality_measure.REFERENCE_SAMPLES // 2
     ref_r = renderer(with_overrides(scene, max_depth=REFERENCE_MAX_DEPTH, min_weight=REFERENCE_MIN_WEIGHT))
     ref_full = (ref_r.render(W, H, half, REFERENCE_SEED).astype(np.float64)
                 + ref_r.render(W, H, half, REFERENCE_SEED + 1)) / 2
     ref_centre = ref_r.render(W, H, 1).astype(np.float64)
     cand = q.Candidate(4, 2, 0.01)
     cand_r = renderer(with_overrides(scene, max_depth=cand.max_depth, min_weight=cand.min_weight))
-    img_full = cand_r.render(W, H, cand.samples, q.RENDER_SEED).astype(np.float64)
+    img_full = cand_r.render(W, H, cand.samples, kit.RENDER_SEED).astype(np.float64)
     t_full = np.mean((cand_r.render(W, H, 1).astype(np.float64) - ref_centre) ** 2, axis=-1)
 
     ref, img = mosaic_of(ref_full, lay), mosaic_of(img_full, lay)
@@ -136,7 +139,7 @@ def test_the_truncation_control_variate_measures_the_whole_image(gl, renderer): 
 
 
 def test_a_candidate_s_time_is_that_of_the_render_it_stands_for(gl, monkeypatch):  # noqa: F811
-    """The time model (viewer/quality.py, Measurement._run): one sample is
+    """The time model (viewer/measure/quality.py, Measurement._run): one sample is
     the median pass plus a read-back; two or more on a checkered plane are
     timed with footprint samples plus their mask made once, as
     Renderer.render draws them.  The timers are replaced by fixed values so
@@ -188,7 +191,7 @@ def test_timed_passes_compile_nothing(gl, monkeypatch):  # noqa: F811
     lay = q.layout(160, 90)
     cands = [q.Candidate(1, 2, 0.01), q.Candidate(1, 10, 0.0001)]    # two stack sizes: two sets of variants
     q.Measurement(gl, scene, lay, cands).run()
-    assert len(timed) == 2 * (1 + q.FULL_TIMED_PASSES), timed
+    assert len(timed) == 2 * (1 + quality_measure.FULL_TIMED_PASSES), timed
     assert min(groups for _, groups in timed) > 1                   # culled: several variants to build
     assert [built for built, _ in timed] == [0] * len(timed)
 
@@ -202,7 +205,7 @@ def test_a_new_driver_release_is_a_new_machine():
             self.info = {"GL_RENDERER": "llvmpipe (LLVM 15.0.6, 256 bits)",
                          "GL_VERSION": f"4.5 (Core Profile) Mesa {version}"}
 
-    old, new = q.machine(FakeCtx("22.3.6")), q.machine(FakeCtx("25.0.7"))
+    old, new = quality_cache.machine(FakeCtx("22.3.6")), quality_cache.machine(FakeCtx("25.0.7"))
     assert old["gl_renderer"] == new["gl_renderer"]
     assert old != new
-    assert q.machine(FakeCtx("25.0.7")) == new
+    assert quality_cache.machine(FakeCtx("25.0.7")) == new

@@ -1,4 +1,4 @@
-"""The numerical stability suite (viewer/stress.py, ``glassray stress``) as
+"""The numerical stability suite (viewer/measure/stress.py, ``glassray stress``) as
 tests: every case at a tiny size must stay within its stated tolerance
 against the float64 reference, the textbook intersection formulas
 (NAIVE_INTERSECT) must be caught by it, and the command line lists, runs
@@ -14,8 +14,9 @@ import sys
 import numpy as np
 import pytest
 
-from viewer.gpu import packing as gpu_scene
-from viewer.measure import stress
+from viewer.gpu import block as gpu_block
+from viewer.cli import stress as cli_stress
+from viewer.measure import stress_cases, stress_report, stress_suite
 
 SIZE = (48, 27)   # cases that need a pixel on the view axis use 49x27
 
@@ -23,25 +24,25 @@ SIZE = (48, 27)   # cases that need a pixel on the view axis use 49x27
 @pytest.fixture(scope="module")
 def suite(gl):
     gl.__enter__()  # current even if an earlier test left another context current
-    return stress.Suite(gl)
+    return stress_suite.Suite(gl)
 
 
-def _describe(r: stress.CaseResult) -> str:
-    return "\n".join([stress.format_table([r])])
+def _describe(r: stress_suite.CaseResult) -> str:
+    return "\n".join([stress_report.format_table([r])])
 
 
 # The 1e-4 wall needs surface offsets below half the wall where the glass is
 # (about 6 units from the eye: EPS_REL * 6 + EPS_SCENE * 6 < 5e-5); with
 # EPS_REL = 1e-5 the media probe 2 eps past the outer surface lands beyond the
 # inner one and the wall is skipped.  See README, "Numerical stability".
-_OFFSETS_TOO_LARGE = gpu_scene.EPS_REL > 5e-6
+_OFFSETS_TOO_LARGE = gpu_block.EPS_REL > 5e-6
 _XFAIL = {"thin-wall-1e-4": pytest.mark.xfail(_OFFSETS_TOO_LARGE, strict=True,
-                                              reason="gpu_scene.EPS_REL too large for a 1e-4 wall")}
+                                              reason="gpu_block.EPS_REL too large for a 1e-4 wall")}
 
 
-@pytest.mark.parametrize("name", [pytest.param(n, marks=_XFAIL.get(n, ())) for n in stress.case_names()])
+@pytest.mark.parametrize("name", [pytest.param(n, marks=_XFAIL.get(n, ())) for n in stress_cases.case_names()])
 def test_case_within_tolerance(suite, name):
-    case = stress.get_case(name)
+    case = stress_cases.get_case(name)
     r = suite.run_case(case, SIZE)
     assert r.nonfinite == 0, _describe(r)
     assert r.off1 <= case.tol, _describe(r)
@@ -53,27 +54,27 @@ def test_case_within_tolerance(suite, name):
 def test_every_shipped_scene_is_a_case():
     from viewer.scene.load import builtin_scene_names
 
-    assert {f"scene-{n}" for n in builtin_scene_names()} <= set(stress.case_names())
+    assert {f"scene-{n}" for n in builtin_scene_names()} <= set(stress_cases.case_names())
 
 
 def test_the_suite_catches_the_textbook_formulas(gl):
     # NAIVE_INTERSECT (b^2 - 4c discriminant, -b +- sqrt roots): the default
     # view from ~200 units away loses the hit points to cancellation (wrong
     # shading, self-shadowing) while the robust shader passes the same case.
-    case = stress.get_case("far-camera")
-    naive = stress.Suite(gl, naive=True).run_case(case, SIZE)
+    case = stress_cases.get_case("far-camera")
+    naive = stress_suite.Suite(gl, naive=True).run_case(case, SIZE)
     assert not naive.ok and naive.off1 > 0.01 and naive.acne > 0.005
-    robust = stress.Suite(gl).run_case(case, SIZE)
+    robust = stress_suite.Suite(gl).run_case(case, SIZE)
     assert robust.ok
 
 
 def test_translation_and_scale_helpers_keep_the_image():
-    doc = stress._base()
-    moved = stress.translated(doc, (1e6, 1e6, 1e6))
+    doc = stress_cases._base()
+    moved = stress_cases.translated(doc, (1e6, 1e6, 1e6))
     assert moved["camera"]["position"][0] == doc["camera"]["position"][0] + 1e6
     with pytest.raises(AssertionError):
-        stress.translated(doc, (0.25, 0, 0))        # not a multiple of the checker period (1.0)
-    small = stress.scaled(doc, 1e-3)
+        stress_cases.translated(doc, (0.25, 0, 0))        # not a multiple of the checker period (1.0)
+    small = stress_cases.scaled(doc, 1e-3)
     water = next(m for n, m in small["materials"].items() if n == "water")
     assert np.allclose(water["absorption"], np.array(doc["materials"]["water"]["absorption"]) * 1e3)
     assert small["materials"]["floor"]["checker"]["size"] == pytest.approx(0.5e-3)
@@ -86,11 +87,11 @@ def test_metrics_on_hand_made_images():
     b = a.copy()
     b[0, 0] = (2, 0, 0)       # off by 2 levels
     b[1, 1] = (1, 1, 1)       # off by 1 level: within 1/255
-    assert stress.off_fraction(a, b) == pytest.approx(1 / 20)
+    assert stress_suite.off_fraction(a, b) == pytest.approx(1 / 20)
     mask = np.zeros((4, 5), bool)
     mask[0, 0] = True
-    assert stress.off_fraction(a, b, mask) == 0.0
-    heat = stress.error_heat(a, b, mask)
+    assert stress_suite.off_fraction(a, b, mask) == 0.0
+    heat = stress_report.error_heat(a, b, mask)
     assert heat.shape == (4, 5, 3) and heat.dtype == np.uint8
 
 
@@ -102,7 +103,7 @@ def _stress(*args, cwd=None):
 def test_list_names_every_case():
     r = _stress("--list")
     assert r.returncode == 0, r.stderr
-    for name in stress.case_names():
+    for name in stress_cases.case_names():
         assert f"\n{name}\n" in "\n" + r.stdout
     assert "tolerance:" in r.stdout
 
@@ -134,12 +135,12 @@ def test_a_case_named_twice_is_bad_usage(tmp_path):
 
 def test_exit_status_1_when_a_case_exceeds_its_tolerance(monkeypatch, tmp_path, capsys):
     # the same case with an impossible tolerance (negative) must fail the run
-    strict = stress.Case("axis-x-strict", "axis-x with a negative tolerance", stress.get_case("axis-x").build,
+    strict = stress_cases.Case("axis-x-strict", "axis-x with a negative tolerance", stress_cases.get_case("axis-x").build,
                          centre=True, tol=-1.0)
-    monkeypatch.setattr(stress, "CASES", stress.CASES + [strict])
+    monkeypatch.setattr(stress_cases, "CASES", stress_cases.CASES + [strict])
     args = argparse.Namespace(list=False, case=["axis-x-strict"], size=(16, 9), out=str(tmp_path), columns=3,
                               naive=False, intersections=False, backend="auto", debug=True)
-    assert stress.run(args) == 1
+    assert cli_stress.run(args) == 1
     out = capsys.readouterr().out
     assert "FAIL" in out and "failed: axis-x-strict" in out
 
@@ -155,10 +156,10 @@ def _args(tmp_path, **kw) -> argparse.Namespace:
 
 
 def test_results_md_names_the_machine_and_the_renderer(gl, tmp_path):
-    from viewer.measure.bench import machine_info
+    from viewer.measure.kit import machine_info
     from viewer.gpu.context import describe
 
-    assert stress.run(_args(tmp_path)) == 0
+    assert cli_stress.run(_args(tmp_path)) == 0
     md = (tmp_path / "res" / "results.md").read_text()
     mi = machine_info()
     assert describe(gl) in md
@@ -184,31 +185,31 @@ def test_unwritable_out_is_found_before_the_cases_run(monkeypatch, tmp_path, cap
     import errno
     from pathlib import Path
 
-    from viewer.measure import bench
+    from viewer.measure import outputs
 
-    real = bench.tempfile.mkstemp      # the write check's probe file
+    real = outputs.tempfile.mkstemp      # the write check's probe file
 
     def read_only(*a, dir=None, **kw):
         if Path(dir) == tmp_path / "res":
             raise OSError(errno.EROFS, "Read-only file system")
         return real(*a, dir=dir, **kw)
 
-    monkeypatch.setattr(bench.tempfile, "mkstemp", read_only)
-    monkeypatch.setattr(stress.Suite, "run_case", lambda *a: pytest.fail("a case ran before the folder was checked"))
-    assert stress.run(_args(tmp_path)) == 1
+    monkeypatch.setattr(outputs.tempfile, "mkstemp", read_only)
+    monkeypatch.setattr(stress_suite.Suite, "run_case", lambda *a: pytest.fail("a case ran before the folder was checked"))
+    assert cli_stress.run(_args(tmp_path)) == 1
     assert "cannot write results there: Read-only file system" in capsys.readouterr().err
 
 
 def test_full_disk_names_the_file(monkeypatch, tmp_path, capsys):
     import errno
 
-    import viewer.scene.model
+    from viewer.base import files
 
     def full_disk(folder, name, data, mode):     # what every atomic write writes through
         raise OSError(errno.ENOSPC, "No space left on device")
 
-    monkeypatch.setattr(viewer.scene, "_write_temp", full_disk)
-    assert stress.run(_args(tmp_path)) == 1
+    monkeypatch.setattr(files, "_write_temp", full_disk)
+    assert cli_stress.run(_args(tmp_path)) == 1
     cap = capsys.readouterr()
     assert "res/contact-sheet.png: cannot write: No space left on device" in cap.err
     assert "axis-x" in cap.out and "Traceback" not in cap.err

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from viewer.measure import bench
+from viewer.measure import reference_cache
 from viewer.reference.trace import camera_rays, pixel_rays, render_reference, render_reference_refined, trace
 from viewer.base.sampling import sample_offsets
 from viewer.scene.load import load_scene
@@ -18,7 +18,7 @@ W, H = 24, 14
 @pytest.fixture(scope="module")
 def scene():
     # the peer bench's scene: a clear sphere over an emissive checker, sky above
-    return bench._reference_scene(load_scene("whitted-exact"))
+    return reference_cache.reference_scene(load_scene("whitted-exact"))
 
 
 def test_pixel_rays_are_the_camera_rays(scene):
@@ -99,16 +99,16 @@ def test_bad_counts_are_refused(scene):
 
 def test_bench_caches_the_refined_reference_apart(tmp_path):
     scene = load_scene("whitted-exact")
-    plain, kind, cached = bench.reference_image(scene, "whitted-exact", W, H, 8, tmp_path)
-    refined, _, cached_r = bench.reference_image(scene, "whitted-exact", W, H, 8, tmp_path, refine=32)
+    plain, kind, cached = reference_cache.reference_image(scene, "whitted-exact", W, H, 8, tmp_path)
+    refined, _, cached_r = reference_cache.reference_image(scene, "whitted-exact", W, H, 8, tmp_path, refine=32)
     assert kind == "float64" and not cached and not cached_r
     names = sorted(p.name for p in tmp_path.glob("ref-*.npy"))
     assert len(names) == 2 and any("-s8r32t" in n for n in names)
     assert not np.array_equal(plain, refined)
-    again, _, cached = bench.reference_image(scene, "whitted-exact", W, H, 8, tmp_path, refine=32)
+    again, _, cached = reference_cache.reference_image(scene, "whitted-exact", W, H, 8, tmp_path, refine=32)
     assert cached and np.array_equal(again, refined)
     # a refined count no larger than the base is no refinement: the plain file
-    same, _, cached = bench.reference_image(scene, "whitted-exact", W, H, 8, tmp_path, refine=8)
+    same, _, cached = reference_cache.reference_image(scene, "whitted-exact", W, H, 8, tmp_path, refine=8)
     assert cached and np.array_equal(same, plain)
 
 

@@ -9,16 +9,33 @@ clear message on stderr; a traceback only with --debug.
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import statistics
 import sys
 import time
 from pathlib import Path
 
-import numpy as np
+from .. import api
+from ..adaptive.render import DEFAULT_TARGET_ERROR
+from ..base import interrupt
 from ..base.errors import Failure, UsageError
-from ..gpu.context import size_failure
+from ..base.imageio import OUTPUT_EXTENSIONS, SkyImageError
+from ..base.version import __version__
+from ..gpu.context import ContextError, size_failure
+from ..gpu.shaders import ShaderError
+from ..measure.quality import scene_for_max_error
+from ..scene.load import load_scene, printable, with_overrides
+from ..scene.model import SceneError
+from . import bench, stress
+from .args import (
+    Parser,
+    add_common,
+    add_overrides,
+    float_range,
+    int_range,
+    max_error,
+    size,
+)
 
 SUBCOMMANDS = ("view", "render", "check", "bench", "stress")
 VECTOR_OPTIONS = ("--camera-position", "--camera-target", "--light-position")
@@ -27,117 +44,19 @@ VECTOR_OPTIONS = ("--camera-position", "--camera-target", "--light-position")
 DASH_VALUE_OPTIONS = VECTOR_OPTIONS + ("--size",)
 
 
-# ---------------------------------------------------------------- argument types
-
-
-def _vec3(text: str) -> tuple[float, float, float]:
-    parts = text.split(",")
-    try:
-        vals = tuple(float(p) for p in parts)
-    except ValueError:
-        vals = ()
-    if len(vals) != 3 or not all(math.isfinite(v) for v in vals):
-        raise argparse.ArgumentTypeError(f"expected three finite numbers x,y,z, got {text!r}")
-    return vals  # type: ignore[return-value]
-
-
-def size_type(lo: int = 1, hi: int = 16384):
-    """argparse type for WxH with both sides in lo..hi (shared by bench and stress)."""
-    def parse(text: str) -> tuple[int, int]:
-        try:
-            w, h = (int(p) for p in text.lower().split("x"))
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected WxH such as 1280x720, got {text!r}") from None
-        if not (lo <= w <= hi and lo <= h <= hi):
-            raise argparse.ArgumentTypeError(f"width and height must be in {lo}..{hi}, got {text!r}")
-        return w, h
-    return parse
-
-
-_size = size_type()
-
-
-def int_range(lo: int, hi: int):
-    """An argparse type: an integer in lo..hi (bench's options use it too)."""
-    def parse(text: str) -> int:
-        try:
-            v = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
-        if not lo <= v <= hi:
-            raise argparse.ArgumentTypeError(f"expected an integer in {lo}..{hi}, got {v}")
-        return v
-    return parse
-
-
-def _float_range(lo: float, hi: float, lo_open: bool = False):
-    def parse(text: str) -> float:
-        try:
-            v = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-        if not math.isfinite(v) or (v <= lo if lo_open else v < lo) or v > hi:
-            raise argparse.ArgumentTypeError(f"expected a number in {'(' if lo_open else '['}{lo:g}, {hi:g}], "
-                                             f"got {text!r}")
-        return v
-    return parse
-
-
-def _max_error(text: str) -> float:
-    from ..measure.quality import parse_max_error
-
-    return parse_max_error(text)
-
-
-# ---------------------------------------------------------------- parser
-
-
-def _add_common(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--debug", action="store_true", help="show tracebacks on failure")
-
-
-def _add_overrides(p: argparse.ArgumentParser) -> None:
-    g = p.add_argument_group("scene overrides (each replaces the scene file's value)")
-    g.add_argument("--samples", type=int_range(1, 65536), metavar="N", help="samples per pixel")
-    g.add_argument("--max-depth", type=int_range(1, 64), metavar="N", help="longest chain of interactions")
-    g.add_argument("--min-weight", type=_float_range(0.0, 1.0), metavar="X", help="branch weight cut-off")
-    g.add_argument("--camera-position", type=_vec3, metavar="x,y,z")
-    g.add_argument("--camera-target", type=_vec3, metavar="x,y,z")
-    g.add_argument("--fov", type=_float_range(1.0, 179.0), metavar="DEG", help="vertical field of view")
-    g.add_argument("--light-position", type=_vec3, metavar="x,y,z", help="moves the first point light")
-
-
-class _Parser(argparse.ArgumentParser):
-    """argparse, with a usage error as one line on stderr (cli.md: "one
-    clear message") instead of the usage block before it, which for render
-    is nine lines that hide the error; the line says where the usage is.
-    Options are taken by their whole names only: argparse's prefixes
-    (`--sample 4` for `--samples 4`) would be an interface that the spec
-    does not define and that a new option could make ambiguous."""
-
-    def __init__(self, *args, **kwargs):
-        kwargs.setdefault("allow_abbrev", False)      # subcommands' parsers are made by this class too
-        super().__init__(*args, **kwargs)
-
-    def error(self, message: str):
-        self.exit(2, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
-
-
 def build_parser() -> argparse.ArgumentParser:
-    from ..adaptive.sampler import DEFAULT_TARGET_ERROR     # (no GL: the module creates no context)
 
-    parser = _Parser(
+    parser = Parser(
         prog="glassray",
         description="A real-time Whitted ray tracer: a rod in a glass of liquid, traced in a fragment shader.",
         epilog="Without a subcommand, 'view' is run. See 'glassray SUBCOMMAND --help'.")
-    from ..base.version import __version__
     parser.add_argument("--version", action="version", version=f"glassray {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="{view,render,check,bench,stress}")
 
     v = sub.add_parser("view", help="the interactive viewer (default)",
                        description="Open the interactive viewer on SCENE (the default scene without one).")
     v.add_argument("scene", nargs="?", metavar="SCENE", help="scene file or built-in scene name")
-    v.add_argument("--size", type=_size, default=(1280, 720), metavar="WxH", help="window size (1280x720)")
+    v.add_argument("--size", type=size, default=(1280, 720), metavar="WxH", help="window size (1280x720)")
     v.add_argument("--vsync", action=argparse.BooleanOptionalAction, default=True, help="sync to the display")
     v.add_argument("--adaptive", action=argparse.BooleanOptionalAction, default=False,
                    help="once the view is still, add samples only where pixels still need them (off by "
@@ -146,8 +65,8 @@ def build_parser() -> argparse.ArgumentParser:
     # hidden: `make run` checks that a window can be opened; the soak test drives N frames
     v.add_argument("--probe", action="store_true", help=argparse.SUPPRESS)
     v.add_argument("--soak", type=int_range(1, 10**7), default=0, metavar="N", help=argparse.SUPPRESS)
-    _add_overrides(v)
-    _add_common(v)
+    add_overrides(v)
+    add_common(v)
 
     r = sub.add_parser("render", help="render offscreen to .png, .npy or .pfm",
                        description="Render SCENE offscreen (EGL, OSMesa as a fallback) and write OUT "
@@ -155,7 +74,7 @@ def build_parser() -> argparse.ArgumentParser:
                                    ".pfm (linear float map).")
     r.add_argument("scene", nargs="?", metavar="SCENE", help="scene file or built-in scene name")
     r.add_argument("-o", "--output", required=True, metavar="OUT", help="output file (.png, .npy or .pfm)")
-    r.add_argument("--size", type=_size, default=(1280, 720), metavar="WxH", help="image size (1280x720)")
+    r.add_argument("--size", type=size, default=(1280, 720), metavar="WxH", help="image size (1280x720)")
     r.add_argument("--seed", type=int_range(0, 2**63 - 1), default=0, metavar="N",
                    help="sample pattern seed (0); the same seed gives the same image")
     r.add_argument("--backend", choices=("auto", "egl", "osmesa"), default="auto",
@@ -171,52 +90,36 @@ def build_parser() -> argparse.ArgumentParser:
                    help="adaptive anti-aliasing: --samples is the mean per pixel, spent where a pixel's "
                         f"estimated error is above --target-error ({'on' if ADAPTIVE_DEFAULT else 'off'} by "
                         "default; on when --target-error is given)")
-    r.add_argument("--target-error", type=_float_range(0.0, 1e9, lo_open=True), metavar="E",
+    r.add_argument("--target-error", type=float_range(0.0, 1e9, lo_open=True), metavar="E",
                    help="adaptive sampling's per-pixel error target, linear radiance on the largest channel "
                         f"(default {DEFAULT_TARGET_ERROR:g})")
-    r.add_argument("--max-error", type=_max_error, metavar="E",
+    r.add_argument("--max-error", type=max_error, metavar="E",
                    help="use the fastest settings (samples, max depth, min weight) whose measured RMSE "
                         "(linear) against a converged reference is at most E; measured once per scene, size "
                         "and machine and cached; --samples/--max-depth/--min-weight fix their value")
-    _add_overrides(r)
-    _add_common(r)
+    add_overrides(r)
+    add_common(r)
 
     c = sub.add_parser("check", help="validate a scene file",
                        description="Validate SCENE (the default scene without one) and print a summary.")
     c.add_argument("scene", nargs="?", metavar="SCENE")
-    _add_common(c)
+    add_common(c)
 
-    # bench and stress own their options (viewer/bench.py, viewer/stress.py:
+    # bench and stress own their options (cli/bench.py, cli/stress.py:
     # add_arguments(parser) and run(args) -> exit status).
-    for name, text in (("bench", "the speed-against-error benchmark"), ("stress", "the numerical stability suite")):
-        mod = _optional_module(name)
-        b = sub.add_parser(name, help=text, description=(mod.__doc__ or text).strip().splitlines()[0]
-                           if mod else f"{text} (not built yet)")
-        if mod is not None:
-            mod.add_arguments(b)
-        elif name == "bench":
-            b.add_argument("scene", nargs="?", metavar="SCENE")
-        _add_common(b)
+    for name, mod, text in (("bench", bench, "the speed-against-error benchmark"),
+                            ("stress", stress, "the numerical stability suite")):
+        b = sub.add_parser(name, help=text, description=mod.DESCRIPTION)
+        mod.add_arguments(b)
+        add_common(b)
     parser.subcommands = sub.choices      # name -> its parser (main() reports leftovers with it)
     return parser
-
-
-def _optional_module(name: str):
-    import importlib
-
-    try:
-        mod = importlib.import_module(f"viewer.{name}")
-    except ModuleNotFoundError as e:
-        if e.name != f"viewer.{name}":
-            raise
-        return None
-    return mod if hasattr(mod, "add_arguments") and hasattr(mod, "run") else None
 
 
 def normalise_argv(argv: list[str]) -> list[str]:
     """Default subcommand and vector (and size) values with a leading minus:
     ``--camera-position -1,2,3`` becomes ``--camera-position=-1,2,3``
-    (options are whole names only: see _Parser)."""
+    (options are whole names only: see args.Parser)."""
     out: list[str] = []
     i = 0
     while i < len(argv):
@@ -239,7 +142,6 @@ def normalise_argv(argv: list[str]) -> list[str]:
 
 
 def _load(args) -> "object":
-    from ..scene.load import load_scene, with_overrides
 
     scene = load_scene(args.scene)
     overrides = {k: getattr(args, k, None) for k in ("samples", "max_depth", "min_weight", "camera_position",
@@ -309,9 +211,7 @@ def _adaptive(args) -> bool:
 
 
 def cmd_render(args) -> int:
-    from ..base.imageio import OUTPUT_EXTENSIONS, write_image
 
-    from ..scene.load import printable
 
     out = Path(args.output)
     shown = printable(args.output)           # (a newline in the name would break the one-line message)
@@ -359,69 +259,41 @@ def cmd_render(args) -> int:
         # pass for it and tell nothing about rendering
         raise UsageError(f"--timing times the colour image; it does not apply to --view {args.view}")
 
-    from ..gpu.context import ContextError, create_offscreen_context
-    from ..gpu.renderer import Renderer
 
     try:
-        ctx, backend = create_offscreen_context(args.backend)
+        r = api.Renderer(args.backend)
     except ContextError as e:
         raise Failure(str(e)) from e
     w, h = args.size
-    if getattr(args, "max_error", None) is not None:
-        from ..measure.quality import scene_for_max_error
-
-        try:
-            scene = scene_for_max_error(ctx, scene, args, w, h, progress=_progress_bar("max-error: measuring"))
-        except BaseException:
-            ctx.release()
-            raise
-    samples = scene.render.samples
-    try:
-        renderer = Renderer(ctx, scene, eager=False)     # compiles what its draws use
-    except BaseException:
-        ctx.release()
-        raise
     timing = None
-    one_draw = "the adaptive render" if adaptive and args.view in ("color", "samples") else (
-        "the cost view" if args.view == "cost" else None)
-    warning = renderer.one_draw_warning(one_draw) if one_draw else None
-    if warning:
-        print(warning, file=sys.stderr)
     try:
-        if adaptive:
-            from ..adaptive.sampler import DEFAULT_TARGET_ERROR, render_adaptive
-
+        if getattr(args, "max_error", None) is not None:
+            scene = scene_for_max_error(r.context, scene, args, w, h, progress=_progress_bar("max-error: measuring"))
+        samples = scene.render.samples
+        # (the scene carries the overrides: _load applied them)
+        draw = r.prepare(scene, size=(w, h), adaptive=adaptive, target_error=args.target_error,
+                         view=args.view, seed=args.seed)
+        one_draw = "the adaptive render" if adaptive and args.view in ("color", "samples") else (
+            "the cost view" if args.view == "cost" else None)
+        warning = r.one_draw_warning(one_draw) if one_draw else None
+        if warning:
+            print(warning, file=sys.stderr)
+        again = f"render {w}x{h} again in passes (ray trees were cut)"
+        image = draw(_progress_bar(f"render {w}x{h}", again=again) if args.view in ("color", "samples") else None)
+        if adaptive and args.view == "color":
             target = args.target_error if args.target_error is not None else DEFAULT_TARGET_ERROR
-
-            def draw(progress=None):
-                return render_adaptive(renderer, w, h, samples, target, args.seed, progress=progress)
-        else:
-            def draw(progress=None):
-                return renderer.render(w, h, samples, args.seed, progress=progress)
-        if args.view == "samples":
-            result = draw(_progress_bar(f"render {w}x{h}", again=f"render {w}x{h} again in passes (ray trees were cut)"))
-            return _write_view(renderer, args.view, w, h, out, samples_map=result.spp)
-        if args.view != "color":
-            return _write_view(renderer, args.view, w, h, out)
-        result = draw(_progress_bar(f"render {w}x{h}", again=f"render {w}x{h} again in passes (ray trees were cut)"))
-        image = result.image if adaptive else result
-        if adaptive:
-            print(f"render: adaptive, {result.mean_spp:.2f} samples per pixel on average "
+            print(f"render: adaptive, {image.info['mean_spp']:.2f} samples per pixel on average "
                   f"(budget {samples}, target error {target:g})", file=sys.stderr)
         if args.timing:
             med = statistics.median(time_frames(draw, args.repeat))
-            # exactly the spec's line (the adaptive line above tells the mode)
+            # exactly the contract's line (the adaptive line above tells the mode)
             timing = f"render: {med:.1f} ms per frame (median of {args.repeat}, {w}x{h}, {samples} samples)"
-    except Exception as e:
-        too_large = size_failure(e, w, h)
-        if too_large is None:
-            raise
-        raise too_large from e
+    except api.RenderError as e:
+        raise (size_failure(e.__cause__, w, h) or Failure(str(e))) from e
     finally:
-        renderer.release()
-        ctx.release()
+        r.close()
     try:
-        write_image(out, image)
+        api.save_image(image, out)
     except OSError as e:
         raise Failure(f"{shown}: cannot write: {e.strerror or e}") from e
     if timing is not None:
@@ -441,30 +313,7 @@ def time_frames(draw, repeat: int) -> list[float]:
     return times
 
 
-def _write_view(renderer, view: str, w: int, h: int, out: Path, samples_map=None) -> int:
-    from ..base.imageio import encode_npy, encode_pfm
-    from ..scene.load import printable
-    from ..base.files import write_atomic
-    from ..base.views import picture, raw_view
-
-    raw = raw_view(renderer, view, w, h, samples_map)
-    try:
-        if out.suffix.lower() == ".png":
-            from PIL import Image
-            import io
-
-            buf = io.BytesIO()
-            Image.fromarray(np.round(255 * picture(view, raw)).astype(np.uint8)).save(buf, format="PNG")
-            write_atomic(out, buf.getvalue())
-        else:
-            write_atomic(out, encode_npy(raw) if out.suffix.lower() == ".npy" else encode_pfm(raw))
-    except OSError as e:
-        raise Failure(f"{printable(str(out))}: cannot write: {e.strerror or e}") from e
-    return 0
-
-
 def cmd_check(args) -> int:
-    from ..scene.load import load_scene
 
     scene = load_scene(args.scene)
     print(scene.summary())
@@ -486,18 +335,11 @@ def cmd_view(args) -> int:
             return app.probe(args)
         except app.WindowError as e:
             raise Failure(str(e)) from None
-    return app.run(args)
-
-
-def cmd_module(args) -> int:
-    mod = _optional_module(args.command)
-    if mod is None:
-        raise Failure(f"glassray {args.command}: not built yet in this version")
-    return mod.run(args)
+    return app.run(args, _load)
 
 
 COMMANDS = {"view": cmd_view, "render": cmd_render, "check": cmd_check,
-            "bench": cmd_module, "stress": cmd_module}
+            "bench": bench.run, "stress": stress.run}
 
 
 def _quiet_stdout() -> None:
@@ -527,14 +369,10 @@ def main(argv: list[str] | None = None) -> int:
     for stream in (sys.stdout, sys.stderr):
         if hasattr(stream, "reconfigure"):
             stream.reconfigure(errors="backslashreplace")
-    from ..base.imageio import SkyImageError
-    from ..scene.model import SceneError
-    from ..gpu.shaders import ShaderError
 
-    from ..base import interrupt
 
     try:
-        # Ctrl-C is taken between draw calls only (viewer/interrupt.py: one
+        # Ctrl-C is taken between draw calls only (viewer/base/interrupt.py: one
         # arriving inside a shader compile crashed llvmpipe)
         with interrupt.deferred():
             return COMMANDS[args.command](args)
