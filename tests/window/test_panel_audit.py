@@ -8,7 +8,7 @@ drawn for real) with a script that makes one widget, named by its push_id
 path and label ("light0/position", "mat-rod/transparency", "obj3/min"),
 report an edit of a given value, as ImGui reports one: the value a user
 dragged or typed, float32 like every ImGui float.  Expectations come from
-the scene format (viewer/scene.py's validation of the saved TOML, the
+the scene format (viewer/scene/'s validation of the saved TOML, the
 spec's ranges), not from the panel."""
 
 from __future__ import annotations
@@ -416,7 +416,7 @@ def test_the_sky_picture_switched_on_compiles_once(script, gl, tmp_path, monkeyp
 
 def test_max_depth_from_the_panel_compiles_only_past_a_stack_size(script, gl):
     # max depth is a uniform; the stack is compiled with 9, 17, 33 or 65
-    # entries (gpu_scene.stack_size): a depth within its size compiles
+    # entries (gpu/defines.py stack_size): a depth within its size compiles
     # nothing, one past it compiles once, and back is cached
     from viewer.gpu.renderer import Renderer
     from viewer.window.panel import Panel

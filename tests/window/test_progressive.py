@@ -224,7 +224,7 @@ def adaptive_setup(gl):
 
 
 def test_adaptive_accumulation_equals_the_offscreen_adaptive_render(adaptive_setup):
-    from viewer.adaptive.sampler import render_adaptive
+    from viewer.adaptive.render import render_adaptive
 
     gl, scene, r, p = adaptive_setup
     w, h = 61, 37
@@ -341,7 +341,7 @@ def _gl_counts(gl) -> dict[str, int]:
 
 
 def test_a_restart_releases_the_adaptive_render_and_starts_over(adaptive_setup):
-    from viewer.adaptive.sampler import render_adaptive
+    from viewer.adaptive.render import render_adaptive
 
     # rounds enough to stop in
     gl, scene, r, p = adaptive_setup

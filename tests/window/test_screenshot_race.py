@@ -11,7 +11,7 @@ import tempfile
 import numpy as np
 import pytest
 
-from viewer.scene import model as scene_mod
+from viewer.base import files as files_mod
 from viewer.window.screenshot import save_linear, save_rgb8, screenshot_path
 
 WHEN = 1_700_000_000.0
@@ -31,7 +31,7 @@ def rival(monkeypatch, tmp_path):
             p.write_bytes(OTHERS)
             taken.append(p)
         return real(*a, **kw)
-    monkeypatch.setattr(scene_mod.tempfile, "mkstemp", mkstemp)
+    monkeypatch.setattr(files_mod.tempfile, "mkstemp", mkstemp)
     return taken
 
 
@@ -54,7 +54,7 @@ def test_a_name_taken_meanwhile_is_not_replaced(rival, tmp_path, save):
 def test_without_hard_links_names_are_still_never_replaced(monkeypatch, rival, tmp_path):
     def no_link(src, dst, *a, **kw):
         raise OSError(errno.EPERM, "Operation not permitted")
-    monkeypatch.setattr(scene_mod.os, "link", no_link)
+    monkeypatch.setattr(files_mod.os, "link", no_link)
     img = np.full((2, 3, 3), 0.5, np.float32)
     p = save_linear(img, tmp_path, WHEN)
     q = save_linear(img, tmp_path, WHEN)
@@ -75,7 +75,7 @@ def test_a_new_screenshot_gets_the_mode_a_plain_open_gives(tmp_path):
 
 
 def test_a_failed_write_without_hard_links_leaves_no_short_file(monkeypatch, tmp_path):
-    monkeypatch.setattr(scene_mod.os, "link", lambda *a, **kw: (_ for _ in ()).throw(OSError(errno.EPERM, "no")))
+    monkeypatch.setattr(files_mod.os, "link", lambda *a, **kw: (_ for _ in ()).throw(OSError(errno.EPERM, "no")))
     real_fsync = os.fsync
     calls = []
 
@@ -84,7 +84,7 @@ def test_a_failed_write_without_hard_links_leaves_no_short_file(monkeypatch, tmp
         if len(calls) == 2:                           # the temporary file's passes, the named file's fails
             raise OSError(errno.ENOSPC, "No space left on device")
         return real_fsync(fd)
-    monkeypatch.setattr(scene_mod.os, "fsync", fsync)
+    monkeypatch.setattr(files_mod.os, "fsync", fsync)
     with pytest.raises(OSError):
         save_linear(np.zeros((1, 1, 3), np.float32), tmp_path, WHEN)
     assert list(tmp_path.iterdir()) == []

@@ -1,4 +1,4 @@
-"""The viewer's "max error" setting (viewer/app.py over viewer/quality.py):
+"""The viewer's "max error" setting (viewer/window/app.py over viewer/measure/quality.py):
 when it measures, which measurements a new budget picks from, and what it
 prints.  Each test drives a real Viewer (a GLFW window under Xvfb) in a
 process of its own, calling the methods the panel and the keys call, with
@@ -51,7 +51,7 @@ material = "mirror"
 # then the steps of each test; it prints one JSON line of what it saw
 PRELUDE = """
 import json, sys
-from viewer.cli import build_parser, _load
+from viewer.cli.commands import build_parser, _load
 from viewer import app
 
 args = build_parser().parse_args(["view", sys.argv[1], "--size", "48x27", "--no-vsync"])

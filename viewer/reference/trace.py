@@ -47,6 +47,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..base.imageio import read_picture_encoded  # 16-bit colour PNGs at full depth
 from ..base.sampling import sample_offsets
 from ..scene.model import Scene, SceneObject
 from ..scene.load import unit_vector
@@ -400,8 +401,6 @@ def _load_sky_image(path: Path) -> np.ndarray:
         if path.suffix.lower() == ".pfm":
             img = _read_pfm(path)
         else:
-            from ..base.imageio import read_picture_encoded   # (16-bit colour PNGs at full depth)
-
             img = _srgb_to_linear(read_picture_encoded(path))
         _SKY_CACHE[key] = img
     return _SKY_CACHE[key]

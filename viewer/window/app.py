@@ -9,7 +9,7 @@ that still need samples get more after the first full sample -- and nothing at
 all once the scene's ``samples`` are reached: the loop then sleeps in
 ``glfw.wait_events``).  The settings panel,
 the HUD and the help overlay are Dear ImGui (imgui-bundle) widgets from
-viewer/ui.py; without imgui-bundle the viewer still runs, with the HUD in
+viewer/window/panel.py; without imgui-bundle the viewer still runs, with the HUD in
 the window title and the help on stdout.
 """
 
@@ -21,6 +21,7 @@ import math
 import os
 import sys
 import time
+import traceback
 from dataclasses import fields
 
 # imgui-bundle ships its own GLFW library and points the glfw package at it,
@@ -41,7 +42,11 @@ import moderngl  # noqa: E402
 import numpy as np  # noqa: E402
 
 from ..base import interrupt
-from .controls import HELP_ALL, VIEWS, Controls, merge_reloaded  # noqa: E402
+from ..base.errors import Failure
+from ..base.views import picture, raw_view
+from ..gpu.context import size_failure
+from ..measure import quality
+from .controls import HELP_ALL, Controls, merge_reloaded  # noqa: E402
 from .progressive import Progressive  # noqa: E402
 from ..gpu.renderer import Renderer  # noqa: E402
 from ..scene.model import Scene, SceneError  # noqa: E402
@@ -123,14 +128,15 @@ def probe(args) -> int:
     return 0
 
 
-def run(args) -> int:
-    from ..base.errors import Failure
-    from ..cli.commands import _load
-    from ..gpu.context import size_failure
+def run(args, load) -> int:
+    """Open the viewer on `load(args)` and run it until the window closes.
 
-    scene = _load(args)
+    `load` (args -> Scene: the scene file plus the command line's overrides)
+    is handed in by the caller, the CLI, so that F5 reloads exactly what the
+    command line asked for without the window layer importing the CLI."""
+    scene = load(args)
     try:
-        viewer = Viewer(args, scene, _load)
+        viewer = Viewer(args, scene, load)
     except WindowError as e:
         raise Failure(str(e)) from None
     try:
@@ -256,7 +262,7 @@ class Viewer:
             return
         imgui = self.imgui
         try:
-            from .panel import Panel
+            from .panel import Panel  # imports imgui_bundle: only when it loaded (IMGUI_ERROR)
 
             imgui.create_context()
             imgui.get_io().set_ini_filename(None)
@@ -414,7 +420,7 @@ class Viewer:
         warm = min(max(50, self.soak // 5), self.soak // 2)
         while not glfw.window_should_close(self.window):
             self._wait()
-            interrupt.check()         # Ctrl-C in the terminal (deferred: viewer/interrupt.py)
+            interrupt.check()         # Ctrl-C in the terminal (deferred: viewer/base/interrupt.py)
             if self.soak:
                 self._soak_step()
                 if self.frames == warm:
@@ -701,7 +707,7 @@ class Viewer:
                 f"max depth {self.scene.render.max_depth}", *q]
 
     def _draw_overlays(self) -> None:
-        from .panel import draw_help, draw_hud
+        from .panel import draw_help, draw_hud  # imgui_bundle, present once _setup_imgui ran
 
         msg = self.message if time.perf_counter() < self.message_until else ""
         lines = self._hud_lines()
@@ -739,8 +745,6 @@ class Viewer:
         else:
             sc = self.prog.preview_scale(max(5.0, self.prog.target_ms - self.overhead_ms))
             size = (max(1, round(fbw * sc)), max(1, round(fbh * sc)))
-        from ..base.views import raw_view
-
         raw = raw_view(self.renderer, self.controls.view, *size)   # into the renderer's kept target
         pic = window_picture(self.controls.view, raw, fbw, fbh)
         if self.debug_tex is None or self.debug_tex.size != (fbw, fbh):
@@ -770,8 +774,6 @@ class Viewer:
         """The panel's "max error" changed: switched on (measure unless
         cached, then apply the pick), off (restore the settings), a new
         budget (pick again from the measurements), or "measure again"."""
-        from ..measure import quality
-
         if not self._quality_on():
             self._quality_off("")
             return
@@ -827,8 +829,6 @@ class Viewer:
                                    f"{100 * job.fraction:.0f}%")
 
     def _quality_finish(self) -> None:
-        from ..measure import quality
-
         meas, cache, cands = self.quality_parts
         choice = quality.finish(meas, cache, cands, self.panel.max_error)
         self.quality_choice = choice
@@ -875,8 +875,6 @@ class Viewer:
             self.good_scene = copy.deepcopy(self.scene)
         except Exception as e:  # ShaderError, a scene the packer rejects
             if self.debug:
-                import traceback
-
                 traceback.print_exc()
             self._error(f"change not applied: {e}")
             for f in fields(Scene):
@@ -911,7 +909,7 @@ class Viewer:
             return
         merged = merge_reloaded(self.file_scene, fresh, self.scene)
         try:
-            renderer = Renderer(self.ctx, merged)  # compiles trace.frag from disk
+            renderer = Renderer(self.ctx, merged)  # compiles shaders/ from disk
         except Exception as e:
             # the shaders or the new scene's shader (a driver may reject it):
             # both stay as they were
@@ -1065,8 +1063,6 @@ def window_picture(view: str, raw: np.ndarray, width: int, height: int) -> np.nd
     nearest pixel) coloured as ``glassray render --view`` does
     (viewer.views.picture); a legend strip (depth, cost) replaces the
     picture's bottom rows, so that the view keeps the image's framing."""
-    from ..base.views import picture
-
     h, w = raw.shape[:2]
     if (w, h) != (width, height):
         ys = np.arange(height) * h // height

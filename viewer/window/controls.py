@@ -1,5 +1,5 @@
 """What the viewer's inputs do, with no window code: the window module
-(viewer/app.py) turns GLFW events into calls on :class:`Controls`, which move
+(viewer/window/app.py) turns GLFW events into calls on :class:`Controls`, which move
 the orbit camera and the scene's light and change the render settings.
 Everything here is plain Python, so the tests drive it directly.
 
@@ -54,7 +54,7 @@ HELP = [
 ]
 
 
-#: What the window shows: the image, or a debug view of viewer/views.py
+#: What the window shows: the image, or a debug view of viewer/base/views.py
 #: (the rays traced per pixel, the first hit's normal, distance or object).
 VIEWS = ("image", "cost", "normals", "depth", "objects")
 

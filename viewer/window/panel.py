@@ -13,16 +13,19 @@ from __future__ import annotations
 
 import copy
 import math
+import sys
 from dataclasses import dataclass
+from importlib import resources
 from pathlib import Path
 
 import numpy as np
 from imgui_bundle import imgui
 
 from .controls import HELP_ALL as HELP, VIEWS, first_point_light
-from ..scene.model import MAX_LIGHTS, MAX_OBJECTS, MAX_TRANSPARENT_OBJECTS, Checker, Light, Material, Scene, SceneError, SceneObject
+from ..scene.model import (MAX_LIGHTS, MAX_OBJECTS, MAX_TRANSPARENT_OBJECTS, Camera, Checker, Light, Material, Scene,
+                           SceneError, SceneObject)
 from ..scene.save import save_scene
-from ..scene.load import scene_from_dict
+from ..scene.load import scene_from_dict, validate_camera
 
 _CLAMP = imgui.SliderFlags_.always_clamp
 _HDR = imgui.ColorEditFlags_.hdr | imgui.ColorEditFlags_.float
@@ -107,8 +110,6 @@ class Panel:
     def default_save_path(scene: Scene) -> str:
         p = scene.path
         try:
-            from importlib import resources
-
             builtin = Path(str(resources.files("viewer.scene.builtin"))).resolve()
             if p is not None and Path(p).resolve().parent != builtin:
                 return str(p)
@@ -553,8 +554,6 @@ class Panel:
             save_scene(scene, path)
         except (OSError, ValueError) as e:
             self.status = f"could not save {path}: {getattr(e, 'strerror', None) or e}"
-            import sys
-
             print(f"glassray: {self.status}", file=sys.stderr)
             return False
         self.status = f"saved {path}"
@@ -573,8 +572,6 @@ def _base_dir(scene: Scene) -> Path:
     if scene.path is not None:
         folder = Path(scene.path).resolve().parent
         try:
-            from importlib import resources
-
             if folder != Path(str(resources.files("viewer.scene.builtin"))).resolve():
                 return folder
         except Exception:
@@ -674,9 +671,6 @@ def _what(o: SceneObject) -> str:
 def _camera_problem(pos, tgt) -> str | None:
     """Why the scene format refuses this camera ("camera.target: must differ
     from camera.position"), or None."""
-    from ..scene.model import Camera, SceneError
-    from ..scene.load import validate_camera
-
     try:
         validate_camera(Camera(tuple(pos), tuple(tgt)))
     except SceneError as e:

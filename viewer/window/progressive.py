@@ -37,7 +37,9 @@ import time
 import moderngl
 import numpy as np
 
-from ..adaptive.sampler import AdaptiveRender, AdaptiveSampler, footprint_default
+from ..adaptive.render import AdaptiveRender
+from ..adaptive.sampler import AdaptiveSampler
+from ..gpu.footprint import FootprintSampler, footprint_default
 from ..base.sampling import sample_offsets
 from ..gpu.shaders import build_program
 
@@ -79,9 +81,9 @@ class Progressive:
         self.uploads = 0  # times accum_tex got new adaptive sums (the viewer shows them at once)
         # uniform mode's footprint samples (Renderer.render's, so that a
         # finished accumulation equals the offscreen image): an
-        # AdaptiveSampler of the accumulation's size whose mask is made for
+        # FootprintSampler of the accumulation's size whose mask is made for
         # each still view by its direct_footprints steps, before the first band
-        self._fp: AdaptiveSampler | None = None
+        self._fp: FootprintSampler | None = None
         self._fp_steps = None     # those steps while they run
         self._fp_ready = False    # the mask is the current view's
 
@@ -267,7 +269,7 @@ class Progressive:
             if fp is None or fp.renderer is not self.renderer or (fp.width, fp.height) != (w, h):
                 if fp is not None:
                     fp.release()
-                self._fp = AdaptiveSampler(self.renderer, w, h, footprint=True)
+                self._fp = FootprintSampler(self.renderer, w, h)
             self._fp_steps = self._fp.direct_footprints()
         t0 = time.perf_counter()
         while True:
@@ -286,7 +288,7 @@ class Progressive:
         y0 = h - self.next_row - rows  # GL rows count from the bottom
         offset, viewport = (float(off[0]), float(off[1])), (0, y0, w, rows)
         if self._fp_ready:
-            groups = self.renderer.programs_for(w, h, **AdaptiveSampler.FOOTPRINT_SAMPLES)
+            groups = self.renderer.programs_for(w, h, **FootprintSampler.FOOTPRINT_SAMPLES)
             self.renderer.draw_groups(groups, w, h, offset, viewport, self._fp.bind_footprint)
         else:
             self.renderer.draw_sample(w, h, offset, viewport)
