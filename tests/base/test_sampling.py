@@ -1,4 +1,4 @@
-"""The sub-pixel sample pattern (viewer/sampling.py): properties checked
+"""The sub-pixel sample pattern (viewer/base/sampling.py): properties checked
 directly, independent of any render."""
 
 from __future__ import annotations

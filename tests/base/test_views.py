@@ -100,7 +100,7 @@ MANY_LIGHTS = {
 
 
 def test_lights_and_materials_read_by_literal_index_give_the_gathered_values(gl):
-    # pickLight / pickMaterial (trace.frag) select among reads at literal
+    # pickLight / pickMaterial (shaders/lib/shade.glsl) select among reads at literal
     # indices; without SCENE_*_INDICES the shader reads lights[j] and
     # materials[objects[k].info.y] directly.  The same values, so the same
     # image bit for bit, at 1 sample and with footprint samples.
@@ -122,7 +122,8 @@ def test_lights_and_materials_read_by_literal_index_give_the_gathered_values(gl)
 
 
 def test_index_lists_stop_at_pick_max():
-    from viewer.gpu.packing import PICK_MAX, index_list_macros
+    from viewer.gpu.defines import index_list_macros
+    from viewer.gpu.driver import PICK_MAX
 
     doc = dict(MANY_LIGHTS)
     macros = index_list_macros(make_scene(doc))
@@ -135,7 +136,7 @@ def test_index_lists_stop_at_pick_max():
 
 
 def test_driver_defines_keep_the_gather_on_old_llvmpipe_only():
-    from viewer.gpu.packing import driver_defines
+    from viewer.gpu.driver import driver_defines
 
     lp = "llvmpipe (LLVM 15.0.6, 256 bits)"
     assert driver_defines(lp, "4.5 (Core Profile) Mesa 22.3.6") == {"SCENE_MATERIAL_INDICES(X)": None}

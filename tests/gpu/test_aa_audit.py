@@ -7,8 +7,8 @@ from __future__ import annotations
 import numpy as np
 
 from viewer.reference import trace as REF
-from viewer.adaptive.sampler import AdaptiveRender
-from viewer.gpu.packing import camera_uniforms
+from viewer.adaptive.render import AdaptiveRender
+from viewer.gpu.block import camera_uniforms
 from viewer.gpu.renderer import Renderer
 from viewer.scene.load import load_scene
 

@@ -1,4 +1,4 @@
-"""Screen-tile culling (viewer/culling.py): every tile drawn with a shader
+"""Screen-tile culling (viewer/gpu/culling.py): every tile drawn with a shader
 that lists only the objects its rays can meet must give the image of the
 scene's full shader, bit for bit, and the plans must really leave objects
 out where they can."""
@@ -108,7 +108,7 @@ def test_reflective_or_transparent_tiles_get_every_object(gl):
     # a tile through the mirror ball's centre needs everything
     eye = np.array(scene.camera.position)
     c = np.array(scene.objects[ball].center) - eye
-    from viewer.gpu.packing import camera_uniforms
+    from viewer.gpu.block import camera_uniforms
     cam = camera_uniforms(scene, 160, 90)
     f, r, u = (np.array(cam[k]) for k in ("camForward", "camRight", "camUp"))
     # solve c ~ s (f + a r + b u): a, b from projections
@@ -174,7 +174,7 @@ def test_segment_distance():
 def _surface_points(obj, rng, n=20000):
     """Points spread over the object's surface (world frame), for checking
     its support function from outside the code under test."""
-    from viewer.gpu.packing import AXES, rotation_world_from_local
+    from viewer.gpu.geometry import AXES, rotation_world_from_local
     if obj.type == "sphere":
         v = rng.normal(size=(n, 3))
         return np.array(obj.center) + obj.radius * v / np.linalg.norm(v, axis=1, keepdims=True)

@@ -8,7 +8,7 @@ over all its loops together, silently: a walk of a few thousand nodes was
 cut there and the rest of the tree dropped (two glass slabs at max_depth 20,
 min_weight 0: 0.000002 instead of 0.857).  Renderer.render now traces such
 trees in passes of at most Renderer.RESUME_BUDGET nodes, each resuming where
-the last stopped (shaders/trace.frag, RESUME).  A driver without such a limit
+the last stopped (shaders/resume.frag, lib/resume.glsl).  A driver without such a limit
 (NVIDIA's: seen on 2026-12-04) cuts nothing: there the tests that need a cut
 check that none was reported and the image is still right.
 """

@@ -3,7 +3,7 @@ float64 (colours, intensities and exposures beyond 3.4e38 or below 1e-38,
 checker squares of 1e300, a camera 5e-324 from its target, lights 1e20 to
 1e300 away or pointing along [1e300, -1e300, 0]).  Each is checked against
 values computed by hand from shared/spec/scene-format.md, on the GPU and
-in the float64 reference (viewer/reference.py).  Where the spec's value is
+in the float64 reference (viewer/reference/trace.py).  Where the spec's value is
 beyond float32, the float32 output holds inf (what float32 makes of it)."""
 
 from __future__ import annotations

@@ -1,5 +1,5 @@
 """The GPU tracer (float32 GLSL) against the independent float64 reference
-tracer (viewer/reference.py, written from the spec, not from the shader).
+tracer (viewer/reference/trace.py, written from the spec, not from the shader).
 
 Images: at most 0.1% of the pixels may differ by more than 1/255 in display
 space (8-bit sRGB).  No silhouette mask is needed at this resolution and one

@@ -1,6 +1,6 @@
 """A pixel's mean of few footprint samples can be below 0: a footprint
 sample is a control variate, c_bar L(x) + (c(x) - c_bar)(L(x) - L_ref),
-unbiased but not bounded below (shaders/trace.frag).  On the default scene
+unbiased but not bounded below (shaders/lib/footprint.glsl).  On the default scene
 at 320x180 with 2 samples one pixel came out at -0.041, and because the
 render's check for trees cut by the driver's loop limit took any value
 below 0 for a cut, the whole image was drawn again in resumable passes (5x
@@ -10,7 +10,6 @@ marks only (-inf, NaN) and radiance is clamped at 0 (renderer.py)."""
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 from viewer.gpu import renderer as rmod
 from viewer.gpu.renderer import Renderer, clamp_radiance, cut_marks
@@ -79,7 +78,7 @@ def test_a_cut_tree_still_sends_the_render_to_the_passes(gl, monkeypatch):
 
 
 def test_an_adaptive_image_is_clamped_too():
-    from viewer.adaptive.sampler import AdaptiveRender
+    from viewer.adaptive.render import AdaptiveRender
 
     a = object.__new__(AdaptiveRender)
     a.total = np.array([[[-0.08, 0.2, 0.4, 2.0], [0.3, 0.3, 0.3, 1.0]]], np.float64)
@@ -89,7 +88,7 @@ def test_an_adaptive_image_is_clamped_too():
 
 
 def test_the_quality_mosaic_does_not_take_a_negative_mean_for_a_cut_tree():
-    from viewer.measure.quality import _uncut
+    from viewer.measure.quality_measure import _uncut
 
     img = np.zeros((1, 3, 3))
     img[0, 0] = -0.041

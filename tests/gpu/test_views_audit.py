@@ -11,6 +11,7 @@ import pytest
 
 from conftest import make_scene
 from viewer.measure import quality as q
+from viewer.measure import quality_cache
 from viewer.base import views
 
 # ---------------------------------------------------------------- the legend's labels
@@ -56,8 +57,8 @@ def test_cost_legend_labels_are_whole_counts(monkeypatch):
 
 @pytest.fixture
 def cache(tmp_path, monkeypatch):
-    monkeypatch.setattr(q, "_WARNED", set())
-    key = q.Key("scene-digest", {"gl_renderer": "test", "cpu": "test", "cpus": 1}, q.layout(8, 4), {"version": 0})
+    monkeypatch.setattr(quality_cache, "_WARNED", set())
+    key = quality_cache.Key("scene-digest", {"gl_renderer": "test", "cpu": "test", "cpus": 1}, q.layout(8, 4), {"version": 0})
     return q.Cache(key, tmp_path)
 
 

@@ -17,7 +17,9 @@ import pytest
 from conftest import make_scene
 from test_views_audit import _labels  # the legend's labels as drawn
 from viewer.measure import quality as q
+from viewer.measure import quality_cache
 from viewer.base import views
+from viewer.measure import quality_grid
 
 
 
@@ -59,11 +61,11 @@ def test_depth_view_tells_the_sky_from_the_nearest_hit():
 
 @pytest.fixture
 def quiet(monkeypatch):
-    monkeypatch.setattr(q, "_WARNED", set())
+    monkeypatch.setattr(quality_cache, "_WARNED", set())
 
 
 def _cache(tmp_path, w=8, h=4):
-    key = q.Key("scene-digest", {"gl_renderer": "test", "cpu": "test", "cpus": 1}, q.layout(w, h), {"version": 0})
+    key = quality_cache.Key("scene-digest", {"gl_renderer": "test", "cpu": "test", "cpus": 1}, q.layout(w, h), {"version": 0})
     return q.Cache(key, tmp_path / "quality")
 
 
@@ -95,7 +97,7 @@ def test_an_off_grid_value_keeps_the_cached_measurements_of_a_cut_scene(tmp_path
     scene = make_scene({"objects": [{"type": "sphere", "center": [0, 0.9, 0], "radius": 0.5, "material": "m"}],
                         "materials": {"m": {}}})
     ctx = types.SimpleNamespace(info={"GL_RENDERER": "fake"})
-    monkeypatch.setattr(q, "cache_dir", lambda: tmp_path / "quality")
+    monkeypatch.setattr(quality_cache, "cache_dir", lambda: tmp_path / "quality")
     lay = q.layout(8, 4)
     cache = q.Cache(q.make_key(ctx, scene, lay))
     ref = np.full((4, 8, 3), 0.25)
@@ -104,7 +106,7 @@ def test_an_off_grid_value_keeps_the_cached_measurements_of_a_cut_scene(tmp_path
     meas, _, cands = q.prepare(ctx, scene, 8, 4, samples=3)
     assert meas.reference is not None            # the cached reference, not a new one
     assert set(_grid_measured()) <= set(meas.measured)
-    assert [c.samples for c in meas.todo] == [3] * len(q.TRACE)
+    assert [c.samples for c in meas.todo] == [3] * len(quality_grid.TRACE)
 
 
 @pytest.mark.parametrize("where, value", [

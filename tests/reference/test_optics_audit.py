@@ -1,6 +1,6 @@
 """Optics audit: small adversarial scenes checked against values computed
 from shared/spec/scene-format.md by hand (NumPy), on the GPU and in the
-float64 reference (viewer/reference.py)."""
+float64 reference (viewer/reference/trace.py)."""
 
 from __future__ import annotations
 

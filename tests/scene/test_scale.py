@@ -1,6 +1,6 @@
 """Scenes at any scale (the format sets no unit and no magnitude limit):
 the GPU computes in float32, so the renderer uploads a scene whose camera
-distance is far from 1 scaled by a power of two (gpu_scene.gpu_frame_scene).
+distance is far from 1 scaled by a power of two (gpu/frame.py gpu_frame_scene).
 Checked by invariance: the same scene written at 10^k times the size gives
 the same picture, with no NaN and no numpy warning; and against analytic
 limits (a point light at 1e300 is a directional light)."""
@@ -12,6 +12,7 @@ import warnings
 
 import numpy as np
 import pytest
+from viewer.measure import stress_cases
 
 from conftest import make_scene
 
@@ -63,7 +64,7 @@ def test_a_scene_renders_the_same_at_any_scale(render, k):
 
 def test_ordinary_scenes_are_uploaded_as_they_are():
     # bit-identical images for every ordinary scene: no copy, no scaling
-    from viewer.gpu.packing import gpu_frame_scene
+    from viewer.gpu.frame import gpu_frame_scene
     from viewer.scene.load import builtin_scene_names, load_scene
 
     for name in builtin_scene_names():
@@ -143,7 +144,7 @@ def test_a_plane_1e300_below_is_still_the_ground(render):
 def test_objects_beyond_float32_do_not_crash_or_warn(render, gl):
     # not drawn faithfully (README, implementation limits), but a valid scene:
     # no exception, no numpy warning, no NaN
-    from viewer.gpu.packing import contains_point
+    from viewer.gpu.geometry import contains_point
 
     doc = {"camera": {"position": [0, 1, 5], "target": [0, 0, 0]},
            "lights": [{"position": [4, 6, 3]}],
@@ -163,10 +164,9 @@ def test_the_float64_reference_is_scale_free_too(k):
     # an independent route for the same symmetry; it had an absolute offset
     # floor (1e-5: 0.4% of pixels off) and an absolute probe step (1e20: the
     # floor toward the horizon lost, 3.9%)
-    from viewer.measure import stress
     from viewer.reference.trace import render_reference
     from viewer.scene.load import scene_from_dict
 
-    unit = render_reference(scene_from_dict(stress._base()), 48, 27)
-    img = render_reference(scene_from_dict(stress.scaled(stress._base(), 10.0 ** k)), 48, 27)
+    unit = render_reference(scene_from_dict(stress_cases._base()), 48, 27)
+    img = render_reference(scene_from_dict(stress_cases.scaled(stress_cases._base(), 10.0 ** k)), 48, 27)
     assert float(np.abs(img - unit).max()) < 1e-9

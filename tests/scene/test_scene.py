@@ -18,7 +18,8 @@ from pathlib import Path
 
 import pytest
 
-from viewer.scene import model as scene_mod
+from viewer.scene import load as scene_load
+from viewer.scene import save as scene_save
 from viewer.scene.model import Scene, SceneError
 from viewer.scene.load import builtin_scene_names, load_scene, scene_from_dict, with_overrides
 from viewer.scene.save import save_scene, scene_to_toml
@@ -1144,7 +1145,7 @@ def test_save_fails_before_writing_if_the_scene_cannot_be_serialised(tmp_path, m
     def boom(scene, *args, **kwargs):
         raise RuntimeError("serialiser broke")
 
-    monkeypatch.setattr(scene_mod, "scene_to_toml", boom)
+    monkeypatch.setattr(scene_save, "scene_to_toml", boom)
     with pytest.raises(RuntimeError):
         save_scene(load_scene(None), target)
     assert target.read_bytes() == OLD
@@ -1311,7 +1312,7 @@ def test_far_apart_camera_points_are_not_taken_for_equal(tmp_path):
 
 @pytest.mark.parametrize("v", [(1e-320, -1e-320, 0.0), (3.0, 4.0, 0.0), (1e308, 1e308, -1e308), (0.0, 0.0, -5e-324)])
 def test_unit_vector_neither_underflows_nor_overflows(v):
-    u = scene_mod.unit_vector(v)
+    u = scene_load.unit_vector(v)
     assert math.isclose(math.hypot(*u), 1.0, rel_tol=1e-15)
     # the same direction: u is a positive multiple of v
     k = max(range(3), key=lambda i: abs(v[i]))
