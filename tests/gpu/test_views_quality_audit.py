@@ -143,7 +143,7 @@ def test_valid_edge_values_of_a_cache_file_load(tmp_path, quiet):
 
 def test_a_second_pick_from_the_same_measurement_does_not_write_again(tmp_path, quiet, monkeypatch):
     # the viewer picks again from the same measurement whenever its budget
-    # slider moves (app._quality_finish -> quality.finish): one save is enough
+    # slider moves (MaxError.finish -> quality.finish): one save is enough
     scene = make_scene({})
     lay = q.layout(8, 4)
     cands = q.candidate_grid()

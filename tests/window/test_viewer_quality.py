@@ -52,7 +52,7 @@ material = "mirror"
 PRELUDE = """
 import json, sys
 from viewer.cli.commands import build_parser, _load
-from viewer import app
+from viewer.window import app
 
 args = build_parser().parse_args(["view", sys.argv[1], "--size", "48x27", "--no-vsync"])
 v = app.Viewer(args, _load(args), _load)
@@ -60,7 +60,7 @@ out = {}
 
 def measure_to_the_end():
     frames = 0
-    while v.quality_job is not None:
+    while v.max_error.job is not None:
         v._frame()
         frames += 1
     return frames
@@ -69,8 +69,8 @@ try:
     v._frame()
     v.panel.max_error_on = True
     v.panel.max_error = 0.05
-    v._quality_update()
-    out["first_measured"] = v.quality_job is not None
+    v.max_error.update()
+    out["first_measured"] = v.max_error.job is not None
     measure_to_the_end()
 """
 POSTLUDE = """
@@ -97,8 +97,8 @@ def test_f5_with_nothing_changed_takes_the_measurement_from_the_cache(xdisplay, 
     # size) although the cache's key holds the scene and the shaders
     out, _ = drive(xdisplay, tmp_path, """
         v.reload()
-        out["after_f5_measuring"] = v.quality_job is not None
-        out["after_f5_picked"] = v.quality_choice is not None and v.quality_choice.cache_hit
+        out["after_f5_measuring"] = v.max_error.job is not None
+        out["after_f5_picked"] = v.max_error.choice is not None and v.max_error.choice.cache_hit
     """)
     assert out["first_measured"]
     assert out["after_f5_measuring"] is False
@@ -111,7 +111,7 @@ def test_f5_after_the_scene_file_changed_measures_again(xdisplay, tmp_path, gl):
         p = Path(sys.argv[1])
         p.write_text(p.read_text().replace("position = [0.3, 0.4, 2]", "position = [0.5, 0.4, 2]"))
         v.reload()
-        out["after_edit_measuring"] = v.quality_job is not None
+        out["after_edit_measuring"] = v.max_error.job is not None
     """)
     assert out["after_edit_measuring"] is True
 
@@ -120,26 +120,26 @@ def test_a_new_budget_after_the_camera_moved_is_picked_from_this_view(xdisplay, 
     # the pick came from the measurements of the view where "max error" was
     # switched on, however far the camera had moved since
     out, _ = drive(xdisplay, tmp_path, """
-        first = v.quality_parts
+        first = v.max_error.parts
         v.panel.max_error = 0.06
-        v._quality_update()
-        out["same_view_reused"] = v.quality_parts is first and v.quality_job is None
+        v.max_error.update()
+        out["same_view_reused"] = v.max_error.parts is first and v.max_error.job is None
         v.scene.camera.position = (0.5, 0.3, 4.0)
         v.controls.camera_edited()
         v._frame()
         v.panel.max_error = 0.07
-        v._quality_update()
-        out["moved_reused"] = v.quality_parts is first
-        out["moved_key_is_current"] = v.quality_parts[1].key.stem() != first[1].key.stem()
+        v.max_error.update()
+        out["moved_reused"] = v.max_error.parts is first
+        out["moved_key_is_current"] = v.max_error.parts[1].key.stem() != first[1].key.stem()
         measure_to_the_end()
         # back to the first view: its measurement is in the cache
         v.scene.camera.position = (0.0, 0.0, 5.0)
         v.controls.camera_edited()
         v._frame()
         v.panel.max_error = 0.08
-        v._quality_update()
-        out["back_measuring"] = v.quality_job is not None
-        out["back_key"] = v.quality_parts[1].key.stem() == first[1].key.stem()
+        v.max_error.update()
+        out["back_measuring"] = v.max_error.job is not None
+        out["back_key"] = v.max_error.parts[1].key.stem() == first[1].key.stem()
     """)
     assert out["same_view_reused"] is True
     assert out["moved_reused"] is False and out["moved_key_is_current"] is True
@@ -151,8 +151,8 @@ def test_the_pick_is_printed_once_not_at_every_step_of_the_budget(xdisplay, tmp_
         picks = set()
         for e in (0.05, 0.051, 0.052, 0.053, 0.054, 0.055):
             v.panel.max_error = e
-            v._quality_update()
-            picks.add((v.quality_choice.measured.candidate.key(), v.quality_choice.met))
+            v.max_error.update()
+            picks.add((v.max_error.choice.measured.candidate.key(), v.max_error.choice.met))
         out["picks"] = len(picks)
     """)
     lines = [ln for ln in err.splitlines() if ln.startswith("glassray: max-error ")]

@@ -58,6 +58,9 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("scene", nargs="?", metavar="SCENE", help="scene file or built-in scene name")
     v.add_argument("--size", type=size, default=(1280, 720), metavar="WxH", help="window size (1280x720)")
     v.add_argument("--vsync", action=argparse.BooleanOptionalAction, default=True, help="sync to the display")
+    v.add_argument("--watch", action=argparse.BooleanOptionalAction, default=True,
+                   help="reload when the scene file, its sky picture or (from a source checkout or "
+                        "GLASSRAY_SHADERS) a shader is saved; F5 reloads either way")
     v.add_argument("--adaptive", action=argparse.BooleanOptionalAction, default=False,
                    help="once the view is still, add samples only where pixels still need them (off by "
                         "default: it reaches a given error sooner but then keeps tracing a still view several "
@@ -326,14 +329,14 @@ def cmd_view(args) -> int:
         raise Failure("no display: the viewer needs a window (DISPLAY is not set). "
                       "Render offscreen instead: glassray render -o out.png")
     try:
-        from ..window import app
+        from ..window import app, backend    # glfw, imgui-bundle: only for the viewer
     except ImportError as e:
         raise Failure(f"the interactive viewer cannot start ({e}); "
                       "render offscreen instead: glassray render -o out.png") from None
     if args.probe:
         try:
-            return app.probe(args)
-        except app.WindowError as e:
+            return backend.probe(args)
+        except backend.WindowError as e:
             raise Failure(str(e)) from None
     return app.run(args, _load)
 

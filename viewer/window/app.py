@@ -1,6 +1,6 @@
-"""The interactive viewer: the one module that uses GLFW.
+"""The interactive viewer: its loop and its events.
 
-It opens the window (OpenGL 3.3 core or newer), turns GLFW's events into
+It opens a window from viewer/window/backend.py (OpenGL 3.3 core or newer), turns GLFW's events into
 calls on :class:`viewer.controls.Controls`, runs the loop and draws with the
 shared renderer through :class:`viewer.progressive.Progressive` (previews at
 a reduced resolution while something moves, accumulation at full
@@ -19,38 +19,33 @@ import copy
 import ctypes
 import math
 import os
+import re
 import sys
 import time
 import traceback
 from dataclasses import fields
+from pathlib import Path
 
-# imgui-bundle ships its own GLFW library and points the glfw package at it,
-# so it must be imported before glfw (one GLFW for both).
-_imgui = None
-IMGUI_ERROR: str | None = None
-if os.environ.get("GLASSRAY_NO_IMGUI"):
-    IMGUI_ERROR = "disabled by GLASSRAY_NO_IMGUI"
-else:
-    try:
-        from imgui_bundle import imgui as _imgui  # type: ignore[no-redef]
-    except Exception as _e:  # ImportError, or a broken binary wheel
-        _imgui = None
-        IMGUI_ERROR = f"{type(_e).__name__}: {_e}"
+from . import backend  # first: it imports imgui-bundle before glfw (backend.py says why)
+from .backend import BUTTONS, KEYS, WindowError, create_window, gl_object_counts, init_glfw, no_window_message, rss_kb
 
-import glfw  # noqa: E402
-import moderngl  # noqa: E402
-import numpy as np  # noqa: E402
+import glfw  # noqa: E402  (after backend)
+import moderngl
+import numpy as np
 
 from ..base import interrupt
 from ..base.errors import Failure
-from ..base.views import picture, raw_view
+from ..base.views import raw_view
 from ..gpu.context import size_failure
-from ..measure import quality
-from .controls import HELP_ALL, Controls, merge_reloaded  # noqa: E402
-from .progressive import Progressive  # noqa: E402
-from ..gpu.renderer import Renderer  # noqa: E402
-from ..scene.model import Scene, SceneError  # noqa: E402
-from .screenshot import save_linear, save_rgb8  # noqa: E402
+from ..gpu.renderer import Renderer
+from ..gpu.shaders import shader_root, shaders_editable
+from ..scene.model import Scene, SceneError
+from .controls import Controls, merge_reloaded
+from .hud import VIEW_NAMES, help_text, window_picture
+from .max_error import MaxError
+from .progressive import Progressive
+from .screenshot import save_linear, save_rgb8
+from .watch import FileWatcher, shader_files
 
 #: After the last change, the view counts as still (full resolution) after this long.
 SETTLE_S = 0.12
@@ -60,72 +55,11 @@ DEFAULT_TARGET_MS = 33.0
 ACCUMULATE_DISPLAY_S = 0.25
 #: An idle viewer still wakes this often (s), so that Ctrl-C in its terminal ends it.
 IDLE_WAKE_S = 0.5
+#: ... and this often while it watches files for live reload (s): a save is
+#: seen within about this long (window/watch.py).
+WATCH_WAKE_S = 0.2
 #: How long a HUD message stays.
 MESSAGE_S = 4.0
-#: Time per frame given to measuring for "max error" (at least one pass).
-QUALITY_STEP_S = 0.05
-#: What the HUD says of each debug view.
-VIEW_NAMES = {"cost": "cost (rays traced per pixel)", "normals": "normals (first hit)",
-              "depth": "depth (first hit, log scale)", "objects": "objects (first hit)"}
-
-_KEYS = {getattr(glfw, f"KEY_{c.upper()}"): c for c in "wsadqerphv"}
-_KEYS.update({getattr(glfw, f"KEY_{d}"): str(d) for d in range(1, 10)})
-_KEYS.update({getattr(glfw, f"KEY_KP_{d}"): str(d) for d in range(1, 10)})
-_KEYS.update({glfw.KEY_TAB: "tab", glfw.KEY_F1: "f1", glfw.KEY_F5: "f5", glfw.KEY_F12: "f12",
-              glfw.KEY_ESCAPE: "escape"})
-_BUTTONS = {glfw.MOUSE_BUTTON_LEFT: "left", glfw.MOUSE_BUTTON_RIGHT: "right", glfw.MOUSE_BUTTON_MIDDLE: "middle"}
-
-
-class WindowError(RuntimeError):
-    """No window or no OpenGL 3.3 context (the CLI turns it into exit 1)."""
-
-
-def _no_window_message(detail: str) -> str:
-    disp = os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY") or "(not set)"
-    return (f"cannot open a window on display {disp}: {detail}. "
-            "Render offscreen instead: glassray render -o out.png")
-
-
-def _init_glfw() -> list[str]:
-    errors: list[str] = []
-
-    def on_error(code, desc):
-        errors.append(desc.decode("utf-8", "replace") if isinstance(desc, bytes) else str(desc))
-
-    glfw.ERROR_REPORTING = "ignore"  # reported through on_error and the checks below
-    glfw.set_error_callback(on_error)
-    if not glfw.init():
-        raise WindowError(_no_window_message(errors[-1] if errors else "GLFW could not start"))
-    return errors
-
-
-def _create_window(width: int, height: int, title: str, visible: bool, errors: list[str]):
-    glfw.default_window_hints()
-    glfw.window_hint(glfw.CONTEXT_VERSION_MAJOR, 3)
-    glfw.window_hint(glfw.CONTEXT_VERSION_MINOR, 3)
-    glfw.window_hint(glfw.OPENGL_PROFILE, glfw.OPENGL_CORE_PROFILE)
-    glfw.window_hint(glfw.OPENGL_FORWARD_COMPAT, True)
-    glfw.window_hint(glfw.SCALE_TO_MONITOR, True)
-    glfw.window_hint(glfw.VISIBLE, visible)
-    win = glfw.create_window(width, height, title, None, None)
-    if not win:
-        raise WindowError(_no_window_message(
-            f"no OpenGL 3.3 core context ({errors[-1] if errors else 'window creation failed'})"))
-    return win
-
-
-def probe(args) -> int:
-    """Exit 0 when a window with an OpenGL 3.3 core context can be opened (make run)."""
-    errors = _init_glfw()
-    try:
-        win = _create_window(64, 64, "glassray probe", False, errors)
-        glfw.make_context_current(win)
-        ctx = moderngl.create_context(require=330)
-        ctx.release()
-        glfw.destroy_window(win)
-    finally:
-        glfw.terminate()
-    return 0
 
 
 def run(args, load) -> int:
@@ -152,23 +86,14 @@ def run(args, load) -> int:
         viewer.close()
 
 
-def _rss_kb() -> int:
-    try:
-        with open("/proc/self/statm") as f:
-            return int(f.read().split()[1]) * (os.sysconf("SC_PAGE_SIZE") // 1024)
-    except (OSError, ValueError, IndexError):
-        import resource
-
-        return int(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
-
-
 class Viewer:
     def __init__(self, args, scene: Scene, loader):
         self.args = args
         self.loader = loader  # args -> scene (scene file plus overrides), for F5
         self.debug = bool(getattr(args, "debug", False))
         self.soak = int(getattr(args, "soak", 0) or 0)
-        self.imgui = _imgui
+        self.imgui = backend.imgui
+        self.imgui_error = backend.IMGUI_ERROR    # why there is no panel (None: there is one)
         self.window = None
         self.ctx = None
         self.renderer = None
@@ -177,9 +102,11 @@ class Viewer:
         # what close() releases, set before _open can fail (a shader that does
         # not compile, a sky picture too large for the driver): close() then
         # met none of them and raised AttributeError, which hid the error
-        self.quality_job = None
+        self.max_error = MaxError(self)     # the panel's "max error" (window/max_error.py)
+        self.watcher: FileWatcher | None = None   # live reload (--watch, on by default)
+        self.reload_error = ""              # the last failed reload's message, shown until a good one
         self.debug_tex = self.debug_fbo = None
-        self._errors = _init_glfw()
+        self._errors = init_glfw()
         try:
             self._open(scene)
         except BaseException:
@@ -190,13 +117,13 @@ class Viewer:
 
     def _open(self, scene: Scene) -> None:
         w, h = self.args.size
-        self.window = win = _create_window(w, h, self._title(scene), True, self._errors)
+        self.window = win = create_window(w, h, self._title(scene), True, self._errors)
         glfw.make_context_current(win)
         glfw.swap_interval(1 if getattr(self.args, "vsync", True) else 0)
         try:
             self.ctx = moderngl.create_context(require=330)
         except Exception as e:
-            raise WindowError(_no_window_message(f"no OpenGL 3.3 context ({e})")) from None
+            raise WindowError(no_window_message(f"no OpenGL 3.3 context ({e})")) from None
 
         self.scene = scene
         self.file_scene = copy.deepcopy(scene)  # as loaded: F5 takes what changed on disk since
@@ -243,18 +170,13 @@ class Viewer:
         self.debug_pic = None  # uint8 (H, W, 3), the window's picture
         self.debug_res: tuple[int, int] | None = None
         self.debug_dirty = True
-        # "max error" (viewer.quality): the measurement in progress, the pick
-        self.quality_job = None
-        self.quality_parts = None  # (cache, candidates) of the job
-        self.quality_choice = None
-        self.quality_said = None  # (measurement, candidate, met) of the last pick printed on stderr
-        self.quality_saved = None  # render settings before the pick, restored when it is switched off
-        self.quality_status = ""
 
         self._setup_imgui()
         self._install_callbacks()
+        if getattr(self.args, "watch", True):
+            self.watcher = FileWatcher(self._watched_files())
         if self.imgui is None:
-            print(f"glassray: the settings panel is not available ({IMGUI_ERROR}); "
+            print(f"glassray: the settings panel is not available ({self.imgui_error}); "
                   "install imgui-bundle for it. The HUD is in the window title.", file=sys.stderr)
 
     def _setup_imgui(self) -> None:
@@ -262,7 +184,7 @@ class Viewer:
             return
         imgui = self.imgui
         try:
-            from .panel import Panel  # imports imgui_bundle: only when it loaded (IMGUI_ERROR)
+            from .panel import Panel  # imports imgui_bundle: only when it loaded (backend.IMGUI_ERROR)
 
             imgui.create_context()
             imgui.get_io().set_ini_filename(None)
@@ -278,8 +200,7 @@ class Viewer:
             self.panel = Panel(self.scene, DEFAULT_TARGET_MS)
             self.panel.adaptive = self.prog.adaptive
         except Exception as e:
-            global IMGUI_ERROR
-            IMGUI_ERROR = f"{type(e).__name__}: {e}"
+            self.imgui_error = f"{type(e).__name__}: {e}"
             try:
                 imgui.destroy_context()
             except Exception:
@@ -325,7 +246,7 @@ class Viewer:
         backlog = self._imgui_backlog()      # ImGui's events not taken yet, before this one
         if self._imgui_ready:
             self.imgui.backends.glfw_key_callback(self._addr, key, scancode, action, mods)
-        name = _KEYS.get(key)
+        name = KEYS.get(key)
         if action == glfw.RELEASE or name is None:
             return
         if backlog or self._deferred_keys:
@@ -339,8 +260,8 @@ class Viewer:
             self._shortcut(name, mods, action)
 
     def _shortcut(self, name: str, mods: int, action: int) -> None:
-        if name in "123456789" and action == glfw.PRESS and self._quality_on():
-            self._quality_off("max error off: max depth set by key")
+        if name in "123456789" and action == glfw.PRESS and self.max_error.on:
+            self.max_error.off("max error off: max depth set by key")
         act = self.controls.key(name, shift=bool(mods & glfw.MOD_SHIFT), repeat=action == glfw.REPEAT)
         if act is not None:
             self.actions.append(act)
@@ -362,7 +283,7 @@ class Viewer:
         if self._imgui_ready:
             self.imgui.backends.glfw_mouse_button_callback(self._addr, button, action, mods)
         self.ui_frames = max(self.ui_frames, 2)
-        name = _BUTTONS.get(button)
+        name = BUTTONS.get(button)
         if name is None:
             return
         # the position of the latest motion event (in event order: querying the
@@ -421,6 +342,7 @@ class Viewer:
         while not glfw.window_should_close(self.window):
             self._wait()
             interrupt.check()         # Ctrl-C in the terminal (deferred: viewer/base/interrupt.py)
+            self._watch_step()
             if self.soak:
                 self._soak_step()
                 if self.frames == warm:
@@ -431,7 +353,7 @@ class Viewer:
                     # needed yet (with samples 1 it traces no pixel lists)
                     self.prog.restart()
                     self.prog.compile_adaptive()
-                    gl_start, rss_start = gl_object_counts(self.ctx, self.prog), _rss_kb()
+                    gl_start, rss_start = gl_object_counts(self.ctx, self.prog), rss_kb()
                     variants_start = len(self.renderer._subset_programs)
                 if self.frames >= self.soak:
                     break
@@ -439,7 +361,7 @@ class Viewer:
         if self.soak:
             self.prog.restart()
             self.ctx.finish()
-            gl_end, rss_end = gl_object_counts(self.ctx, self.prog), _rss_kb()
+            gl_end, rss_end = gl_object_counts(self.ctx, self.prog), rss_kb()
             variants_end = len(self.renderer._subset_programs)
             moving = sorted(self._preview_frames)      # none in a soak of 11 frames or fewer
             moving_ms = f"{moving[len(moving) // 2]:.1f}" if moving else "n/a"
@@ -452,7 +374,7 @@ class Viewer:
 
     def _busy(self) -> bool:
         return bool((self.need_preview and self.controls.view == "image") or self.controls.changed or self.actions or self.ui_frames > 0
-                    or self.needs_display or self._want_window_shot or self.quality_job is not None
+                    or self.needs_display or self._want_window_shot or self.max_error.job is not None
                     or (self.controls.view != "image" and self.debug_dirty))
 
     def _wait(self) -> None:
@@ -461,7 +383,7 @@ class Viewer:
             return
         fbw, fbh = glfw.get_framebuffer_size(self.window)
         if fbw <= 0 or fbh <= 0:  # minimised: nothing to draw until it comes back
-            glfw.wait_events_timeout(IDLE_WAKE_S)
+            glfw.wait_events_timeout(self._idle_wake_s())
             return
         if self._busy():
             glfw.poll_events()
@@ -474,15 +396,43 @@ class Viewer:
                 glfw.poll_events()
             return
         if self.message and self.message_until > time.perf_counter():
-            # idle, but a HUD message is to disappear: wake up then
-            glfw.wait_events_timeout(self.message_until - time.perf_counter() + 0.01)
+            # idle, but a HUD message is to disappear: wake up then (or to
+            # look at the watched files, sooner)
+            glfw.wait_events_timeout(min(self.message_until - time.perf_counter() + 0.01, self._idle_wake_s()))
             if time.perf_counter() >= self.message_until:
                 self.message = ""
                 self.needs_display = True
             return
         # idle: all samples done, nothing changed.  Sleep until an event (the
-        # timeout only lets Python see a Ctrl-C now and then).
-        glfw.wait_events_timeout(IDLE_WAKE_S)
+        # timeout lets Python see a Ctrl-C now and then, and a watched file's save)
+        glfw.wait_events_timeout(self._idle_wake_s())
+
+    def _idle_wake_s(self) -> float:
+        if self.watcher is None:
+            return IDLE_WAKE_S
+        return self.watcher.debounce_s if self.watcher.pending() else WATCH_WAKE_S
+
+    # ------------------------------------------------------------ live reload
+
+    def _watched_files(self) -> list[Path]:
+        """The scene file, its sky picture, and the shaders when they come
+        from a folder someone edits (not an installed wheel's copy)."""
+        files = []
+        if self.scene.path is not None:
+            files.append(Path(self.scene.path))
+        if self.scene.sky.type == "image" and self.scene.sky.image_path is not None:
+            files.append(Path(self.scene.sky.image_path))
+        if shaders_editable():
+            files += shader_files(shader_root())
+        return files
+
+    def _watch_step(self) -> None:
+        """A watched file was saved (and held still): reload as F5 does."""
+        if self.watcher is None:
+            return
+        changed = self.watcher.poll()
+        if changed:
+            self.reload(shaders=any(p.suffix in (".frag", ".vert", ".glsl") for p in changed))
 
     def _pending(self, fbw: int, fbh: int) -> bool:
         """Work left once the view is still: samples to accumulate, or the
@@ -498,16 +448,23 @@ class Viewer:
         warning = self.renderer.one_draw_warning("the viewer")
         if warning and warning != self._one_draw_warned:
             print(warning, file=sys.stderr, flush=True)
-            self._say("trees this deep may be cut short here; 'glassray render' traces them whole")
+            self.say("trees this deep may be cut short here; 'glassray render' traces them whole")
         self._one_draw_warned = warning
 
-    def _say(self, text: str, error: bool = False) -> None:
+    def framebuffer_size(self) -> tuple[int, int]:
+        """The window's size in pixels (0 x 0 while minimised)."""
+        return glfw.get_framebuffer_size(self.window)
+
+    def say(self, text: str, error: bool = False) -> None:
+        """Show `text` in the HUD for MESSAGE_S (and on stderr when `error`)."""
         self.message = text
         self.message_until = time.perf_counter() + MESSAGE_S
         if error:
             print(f"glassray: {text}", file=sys.stderr, flush=True)
 
     def _frame(self) -> None:
+        """One turn of the loop: take the input, update the scene, trace
+        (a preview, accumulation, or a debug view), draw what changed."""
         t0 = time.perf_counter()
         win = self.window
         fbw, fbh = glfw.get_framebuffer_size(win)
@@ -524,15 +481,39 @@ class Viewer:
             self.last_change = t0
 
         actions, self.actions = self.actions, []
-        want_shot = 0  # P presses in this frame: one file each (three quick presses made two)
+        want_shot = self._take_actions(actions)
+        ui = self._imgui_ready
+        if ui:
+            self._ui_new_frame()
+        if self.controls.take_changed():
+            self._apply_scene()
+            self.need_preview = True
+            self.debug_dirty = True
+            self.last_change = t0
+        if self.max_error.job is not None:
+            self.max_error.step()
+
+        traced, previewed, show_trace = self._trace(t0, fbw, fbh)
+        trace_ms = self.prog.last_trace_ms if traced else 0.0
+        for _ in range(want_shot):
+            self.screenshot()
+        draw = bool(show_trace or self.needs_display or self.ui_frames > 0 or self._want_window_shot)
+        self._present(draw, ui, t0, fbw, fbh)
+        if draw:
+            self._count_frame(t0, traced, previewed, trace_ms)
+
+    def _take_actions(self, actions: list[str]) -> int:
+        """Do what the keys asked since the last frame; the number of
+        screenshots asked for (P pressed three times quickly: three files)."""
+        want_shot = 0
         for act in actions:
             if act == "quit":
-                glfw.set_window_should_close(win, True)
+                glfw.set_window_should_close(self.window, True)
             elif act == "toggle_panel":
                 if self.panel is not None:
                     self.show_panel = not self.show_panel
                 else:
-                    self._say(f"no settings panel: imgui-bundle is not available ({IMGUI_ERROR})", error=True)
+                    self.say(f"no settings panel: imgui-bundle is not available ({self.imgui_error})", error=True)
             elif act == "help":
                 self.show_help = not self.show_help
                 if self.imgui is None and self.show_help:
@@ -549,68 +530,62 @@ class Viewer:
                 self._want_window_shot = 2
                 self._window_shots += 1
         if self.controls.message:
-            self._say(self.controls.message)
+            self.say(self.controls.message)
             self.controls.message = ""
+        return want_shot
 
-        ui = self._imgui_ready
-        if ui:
-            imgui = self.imgui
-            imgui.backends.opengl3_new_frame()
-            imgui.backends.glfw_new_frame()
-            imgui.new_frame()
-            if self._deferred_keys:
-                # the keys this new_frame took: want_text_input, which it has
-                # just set from the last frame's widgets, says whether a text
-                # field had the keyboard when ImGui took each (trickling, it
-                # takes a key's press and the text typed in different frames)
-                ctx = imgui.get_current_context()
-                queue = ctx.input_events_queue
-                left = queue[0].event_id if len(queue) else ctx.input_events_next_event_id
-                taken = [k for k in self._deferred_keys if k[0] < left]
-                self._deferred_keys = [k for k in self._deferred_keys if k[0] >= left]
-                for _, name, mods, action in taken:
-                    if not self._ui_wants_keys():
-                        self._shortcut(name, mods, action)
-            if self.show_panel:
-                ds = imgui.get_io().display_size
-                self.panel.view = self.controls.view
-                self.panel.quality_status = self.quality_status
-                res = self.panel.draw(self.scene, (ds.x, ds.y))
-                if res.view_changed:
-                    self.controls.set_view(self.panel.view)
-                    self._view_changed()
-                if res.quality_changed or res.remeasure:
-                    self._quality_update(remeasure=res.remeasure)
-                if res.camera_changed:
-                    self.controls.camera_edited()
-                if res.changed:
-                    self.controls.changed = True
-                if res.target_ms_changed:
-                    self.prog.target_ms = self.panel.target_ms
-                if res.adaptive_changed:
-                    self._set_adaptive(self.panel.adaptive)
+    def _ui_new_frame(self) -> None:
+        """Start ImGui's frame: the shortcuts it held back, then the panel and
+        what its edits change."""
+        imgui = self.imgui
+        imgui.backends.opengl3_new_frame()
+        imgui.backends.glfw_new_frame()
+        imgui.new_frame()
+        if self._deferred_keys:
+            # the keys this new_frame took: want_text_input, which it has
+            # just set from the last frame's widgets, says whether a text
+            # field had the keyboard when ImGui took each (trickling, it
+            # takes a key's press and the text typed in different frames)
+            ctx = imgui.get_current_context()
+            queue = ctx.input_events_queue
+            left = queue[0].event_id if len(queue) else ctx.input_events_next_event_id
+            taken = [k for k in self._deferred_keys if k[0] < left]
+            self._deferred_keys = [k for k in self._deferred_keys if k[0] >= left]
+            for _, name, mods, action in taken:
+                if not self._ui_wants_keys():
+                    self._shortcut(name, mods, action)
+        if not self.show_panel:
+            return
+        ds = imgui.get_io().display_size
+        self.panel.view = self.controls.view
+        self.panel.quality_status = self.max_error.status
+        res = self.panel.draw(self.scene, (ds.x, ds.y))
+        if res.view_changed:
+            self.controls.set_view(self.panel.view)
+            self._view_changed()
+        if res.quality_changed or res.remeasure:
+            self.max_error.update(remeasure=res.remeasure)
+        if res.camera_changed:
+            self.controls.camera_edited()
+        if res.changed:
+            self.controls.changed = True
+        if res.target_ms_changed:
+            self.prog.target_ms = self.panel.target_ms
+        if res.adaptive_changed:
+            self._set_adaptive(self.panel.adaptive)
 
-        if self.controls.take_changed():
-            self._apply_scene()
-            self.need_preview = True
-            self.debug_dirty = True
-            self.last_change = t0
-
-        if self.quality_job is not None:
-            self._quality_step()
-
-        # trace: a preview right after a change, full-resolution bands once still
-        # (a debug view instead: its picture, reduced while things move)
-        traced = previewed = False
-        image_view = self.controls.view == "image"
-        if not image_view:
-            show_trace = self._debug_frame(t0, fbw, fbh)
-        elif self.need_preview:
+    def _trace(self, t0: float, fbw: int, fbh: int) -> tuple[bool, bool, bool]:
+        """Trace this frame's share: a preview right after a change,
+        full-resolution samples once still (a debug view instead: its
+        picture, reduced while things move).  (traced, previewed, whether
+        the window should show the result now)."""
+        if self.controls.view != "image":
+            return False, False, self._debug_frame(t0, fbw, fbh)
+        if self.need_preview:
             self.prog.render_preview(max(5.0, self.prog.target_ms - self.overhead_ms))
             self.need_preview = False
-            traced = previewed = True
-            show_trace = True
-        elif not self.prog.done and (self.soak or t0 - self.last_change >= SETTLE_S) and self.quality_job is None:
+            return True, True, True
+        if not self.prog.done and (self.soak or t0 - self.last_change >= SETTLE_S) and self.max_error.job is None:
             landed = (self.prog.passes_done, self.prog.uploads)
             try:
                 self.prog.accumulate(self.prog.target_ms)
@@ -618,23 +593,21 @@ class Viewer:
                 if not self.prog.adaptive:
                     raise
                 self._set_adaptive(False)
-                self._error(f"adaptive accumulation failed, accumulating uniformly: {e}")
-            traced = True
+                self.error(f"adaptive accumulation failed, accumulating uniformly: {e}")
             # progress is shown a few times a second (the display pass and the
             # buffer swap are not free on a software renderer), and at once
             # when a sample completes (adaptive: when new sums land)
-            show_trace = ((self.prog.passes_done, self.prog.uploads) != landed or self.soak
-                          or t0 - self._last_display >= ACCUMULATE_DISPLAY_S)
-        else:
-            show_trace = False
-        trace_ms = self.prog.last_trace_ms if traced else 0.0
+            show = bool((self.prog.passes_done, self.prog.uploads) != landed or self.soak
+                        or t0 - self._last_display >= ACCUMULATE_DISPLAY_S)
+            return True, False, show
+        return False, False, False
 
-        for _ in range(want_shot):
-            self.screenshot()
-
-        draw = show_trace or self.needs_display or self.ui_frames > 0 or self._want_window_shot
+    def _present(self, draw: bool, ui: bool, t0: float, fbw: int, fbh: int) -> None:
+        """Put the picture and the overlays on screen when `draw` (the HUD in
+        the title without ImGui), take a window screenshot when asked, swap."""
+        win = self.window
         if draw:
-            if image_view or self.debug_fbo is None:
+            if self.controls.view == "image" or self.debug_fbo is None:
                 self.prog.display(self.ctx.screen, (0, 0, fbw, fbh))
             else:
                 self.ctx.copy_framebuffer(self.ctx.screen, self.debug_fbo)
@@ -643,6 +616,7 @@ class Viewer:
                 # below must go to the window
                 self.ctx.screen.use()
         if ui:
+            imgui = self.imgui
             if draw:
                 self._draw_overlays()
             imgui.render()
@@ -668,20 +642,24 @@ class Viewer:
             # all of it (it waited for the next mouse move), then the keys
             self.ui_frames = max(self.ui_frames, 1)
 
+    def _count_frame(self, t0: float, traced: bool, previewed: bool, trace_ms: float) -> None:
+        """The HUD's frame time and rate, and the overhead the next preview
+        leaves room for, after a frame that was drawn."""
         t1 = time.perf_counter()
-        if draw:
-            self.frame_ms = (t1 - t0) * 1000.0
-            if self.soak and previewed and self.frames > 10:
-                self._preview_frames.append(self.frame_ms)
-            if traced:
-                self.overhead_ms = 0.8 * self.overhead_ms + 0.2 * max(0.0, self.frame_ms - trace_ms)
-            self._fps_count += 1
-            if t1 - self._fps_t0 >= 0.5:
-                self.fps = self._fps_count / (t1 - self._fps_t0)
-                self._fps_count, self._fps_t0 = 0, t1
+        self.frame_ms = (t1 - t0) * 1000.0
+        if self.soak and previewed and self.frames > 10:
+            self._preview_frames.append(self.frame_ms)
+        if traced:
+            self.overhead_ms = 0.8 * self.overhead_ms + 0.2 * max(0.0, self.frame_ms - trace_ms)
+        self._fps_count += 1
+        if t1 - self._fps_t0 >= 0.5:
+            self.fps = self._fps_count / (t1 - self._fps_t0)
+            self._fps_count, self._fps_t0 = 0, t1
 
     def _hud_lines(self) -> list[str]:
-        q = [self.quality_status] if self._quality_on() and self.quality_status else []
+        q = [self.max_error.status] if self.max_error.on and self.max_error.status else []
+        if self.reload_error:
+            q.append(self.reload_error)
         if self.controls.view != "image":
             rw, rh = self.debug_res or self.prog.size
             return [f"{self.frame_ms:.1f} ms  {self.fps:.0f} fps",
@@ -731,7 +709,7 @@ class Viewer:
         self.needs_display = True
         if self.controls.view == "image":
             self.need_preview = not self.prog.started
-        self._say(f"view: {self.controls.view}")
+        self.say(f"view: {self.controls.view}")
 
     def _debug_frame(self, t0: float, fbw: int, fbh: int, force_full: bool = False) -> bool:
         """Compute the debug view's picture when it is out of date: at a
@@ -765,108 +743,6 @@ class Viewer:
         self.debug_res = None
         self.debug_dirty = True
 
-    # ------------------------------------------------------------ max error (viewer.quality)
-
-    def _quality_on(self) -> bool:
-        return self.panel is not None and self.panel.max_error_on
-
-    def _quality_update(self, remeasure: bool = False) -> None:
-        """The panel's "max error" changed: switched on (measure unless
-        cached, then apply the pick), off (restore the settings), a new
-        budget (pick again from the measurements), or "measure again"."""
-        if not self._quality_on():
-            self._quality_off("")
-            return
-        switched_on = self.quality_saved is None
-        if switched_on:
-            r = self.scene.render
-            self.quality_saved = self.panel.user_render = (r.samples, r.max_depth, r.min_weight)
-        elif self.quality_job is not None and not remeasure:
-            return  # measuring: the pick uses the new budget when it is done
-        elif self.quality_parts is not None and not remeasure:
-            # another budget: pick again from the same measurements, if they
-            # are this view's (the key holds the camera, the lights and the
-            # window's size); else this view's, from the cache where it was
-            # measured before
-            fbw, fbh = glfw.get_framebuffer_size(self.window)
-            key = quality.make_key(self.ctx, self.scene, quality.layout(max(1, fbw), max(1, fbh)))
-            if key.stem() == self.quality_parts[1].key.stem():
-                self._quality_finish()
-                return
-        if self.quality_job is not None:
-            self.quality_job.close()
-            self.quality_job = None
-        fbw, fbh = glfw.get_framebuffer_size(self.window)
-        scene = copy.deepcopy(self.scene)
-        if remeasure and self.quality_parts is not None:  # measure again: not from the cache
-            meas, cache, cands = quality.prepare(self.ctx, scene, max(1, fbw), max(1, fbh))
-            meas = quality.Measurement(self.ctx, scene, meas.layout, cands)
-        else:
-            meas, cache, cands = quality.prepare(self.ctx, scene, max(1, fbw), max(1, fbh))
-        self.quality_parts = (meas, cache, cands)
-        self.quality_job = None if meas.done else meas
-        if meas.done:
-            self._quality_finish()
-        else:
-            self.quality_status = f"max error {self.panel.max_error:.4g}: measuring\u2026 0%"
-            self._say("max error: measuring (once per scene and window size)")
-
-    def _quality_step(self) -> None:
-        job = self.quality_job
-        try:
-            done = job.step(QUALITY_STEP_S)
-        except Exception as e:
-            self.quality_job = self.quality_parts = None
-            self._quality_off("")
-            self._error(f"max error: measuring failed: {e}")
-            return
-        self.ui_frames = max(self.ui_frames, 1)
-        if done:
-            self.quality_job = None
-            self._quality_finish()
-        else:
-            self.quality_status = (f"max error {self.panel.max_error:.4g}: measuring\u2026 "
-                                   f"{100 * job.fraction:.0f}%")
-
-    def _quality_finish(self) -> None:
-        meas, cache, cands = self.quality_parts
-        choice = quality.finish(meas, cache, cands, self.panel.max_error)
-        self.quality_choice = choice
-        c = choice.measured.candidate
-        r = self.scene.render
-        if (r.samples, r.max_depth, r.min_weight) != (c.samples, c.max_depth, c.min_weight):
-            r.samples, r.max_depth, r.min_weight = c.samples, c.max_depth, c.min_weight
-            self.controls.changed = True
-        self.quality_status = (f"max error {choice.max_error:.4g}: " + ("" if choice.met else "not reached, ")
-                               + f"{c.samples} spp, depth {c.max_depth}, w {c.min_weight:g} "
-                               f"(RMSE {choice.measured.rmse:.3g}"
-                               + (f" +- {choice.measured.rmse_se:.2g})" if choice.measured.rmse_se > 0 else ")")
-                               + (f"; {choice.cut_pixels} pixels left out: trees cut by the driver"
-                                  if choice.cut_pixels else ""))
-        self._say(self.quality_status)
-        # on stderr once per pick, not at every step of the budget's slider
-        said = (id(meas), c.key(), choice.met)
-        if said != self.quality_said:
-            self.quality_said = said
-            print(f"glassray: {choice.line()}", file=sys.stderr, flush=True)
-
-    def _quality_off(self, message: str) -> None:
-        if self.quality_job is not None:
-            self.quality_job.close()
-            self.quality_job = None
-        if self.panel is not None:
-            self.panel.max_error_on = False
-        if self.quality_saved is not None:
-            r = self.scene.render
-            r.samples, r.max_depth, r.min_weight = self.quality_saved
-            self.quality_saved = None
-            if self.panel is not None:
-                self.panel.user_render = None
-            self.controls.changed = True
-        self.quality_status = ""
-        if message:
-            self._say(message)
-
     # ------------------------------------------------------------ scene changes
 
     def _apply_scene(self) -> None:
@@ -876,7 +752,7 @@ class Viewer:
         except Exception as e:  # ShaderError, a scene the packer rejects
             if self.debug:
                 traceback.print_exc()
-            self._error(f"change not applied: {e}")
+            self.error(f"change not applied: {e}")
             for f in fields(Scene):
                 setattr(self.scene, f.name, copy.deepcopy(getattr(self.good_scene, f.name)))
             self.controls.camera_edited()
@@ -893,37 +769,57 @@ class Viewer:
         if self.panel is not None:
             self.panel.adaptive = self.prog.adaptive
 
-    def _error(self, text: str) -> None:
-        self._say(text.splitlines()[0] if text else text, error=False)
+    def error(self, text: str) -> None:
+        self.say(text.splitlines()[0] if text else text, error=False)
         print(f"glassray: {text}", file=sys.stderr, flush=True)
         if self.panel is not None:
             self.panel.error = text
 
-    def reload(self) -> None:
-        """F5: the scene file (overrides applied again) and the shaders from
-        disk; on an error the last good ones keep running."""
+    def reload(self, shaders: bool = True) -> None:
+        """F5, or a watched file saved: the scene file (overrides applied
+        again) and, with `shaders`, the shaders from disk; on an error the
+        last good ones keep running.  The files as read are the watcher's
+        new starting point (a failed reload waits for the next save)."""
+        try:
+            self._reload_from_disk(shaders)
+        finally:
+            if self.watcher is not None:
+                self.watcher.watch(self._watched_files())
+
+    def _reload_from_disk(self, shaders: bool) -> None:
         try:
             fresh = self.loader(self.args)
         except SceneError as e:
-            self._error(f"reload failed, keeping the last good scene: {e}")
+            self._reload_failed(f"reload failed, keeping the last good scene: {e}")
             return
         merged = merge_reloaded(self.file_scene, fresh, self.scene)
-        try:
-            renderer = Renderer(self.ctx, merged)  # compiles shaders/ from disk
-        except Exception as e:
-            # the shaders or the new scene's shader (a driver may reject it):
-            # both stay as they were
-            self._error(f"reload failed, keeping the last good scene and shaders: {e}")
-            return
-        try:
-            self.prog.reload_program()
-        except Exception as e:
-            renderer.release()
-            self._error(f"reload failed, keeping the last good shaders: {e}")
-            return
-        self.renderer.release()
-        self.renderer = renderer
-        self.prog.set_renderer(renderer)
+        if shaders:
+            try:
+                renderer = Renderer(self.ctx, merged)  # compiles shaders/ from disk
+            except Exception as e:
+                # the shaders or the new scene's shader (a driver may reject it):
+                # both stay as they were
+                self._reload_failed(f"reload failed, keeping the last good scene and shaders: {e}")
+                return
+            try:
+                self.prog.reload_program()
+            except Exception as e:
+                renderer.release()
+                self._reload_failed(f"reload failed, keeping the last good shaders: {e}")
+                return
+            self.renderer.release()
+            self.renderer = renderer
+            self.prog.set_renderer(renderer)
+        else:
+            # only the scene file changed: the programs stay, and a change of
+            # values compiles nothing (as an edit in the panel)
+            try:
+                self.renderer.set_scene(merged)
+            except Exception as e:      # a scene the driver's shader rejects
+                self.renderer.set_scene(self.scene)
+                self._reload_failed(f"reload failed, keeping the last good scene: {e}")
+                return
+            self.prog.restart()
         self.scene = merged
         self.file_scene = copy.deepcopy(fresh)
         self.good_scene = copy.deepcopy(merged)
@@ -933,17 +829,27 @@ class Viewer:
             self.panel.error = ""
         glfw.set_window_title(self.window, self._title(merged))
         self.debug_dirty = True
-        if self._quality_on():
+        if self.max_error.on:
             # the reloaded scene and shaders: measured unless the cache has
             # them (its key holds both, so an unchanged file is a hit)
-            if self.quality_job is not None:
-                self.quality_job.close()
-            self.quality_job = self.quality_parts = None
-            self._quality_update()
+            self.max_error.close()
+            self.max_error.parts = None
+            self.max_error.update()
         self.need_preview = True
         self.last_change = time.perf_counter()
-        self._say("reloaded scene and shaders")
+        self.reload_error = ""
+        self.say("reloaded scene and shaders" if shaders else "reloaded the scene")
         print("reloaded", flush=True)
+
+    def _reload_failed(self, text: str) -> None:
+        """Say why (stderr, the panel), and keep it in the HUD until a reload
+        succeeds: its first line and the first line naming a file:line (a
+        shader compiler's message has the location on a line of its own)."""
+        self.error(text)
+        lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
+        located = next((ln for ln in lines[1:] if re.search(r"\.(frag|vert|glsl|toml):\d+", ln)), None)
+        self.reload_error = lines[0] + (f" | {located}" if located else "") if lines else text
+        self.needs_display = True
 
     # ------------------------------------------------------------ screenshots
 
@@ -969,10 +875,10 @@ class Viewer:
                 folder = os.getcwd()
             except OSError:             # the folder the viewer runs in was removed
                 folder = "the current folder, which no longer exists"
-            self._say(f"screenshot not saved in {folder}: {e.strerror or e}", error=True)
+            self.say(f"screenshot not saved in {folder}: {e.strerror or e}", error=True)
             return
         print(os.path.abspath(path), flush=True)
-        self._say(f"saved {path.name}")
+        self.say(f"saved {path.name}")
 
     def _window_screenshot(self, fbw: int, fbh: int) -> None:
         raw = self.ctx.screen.read(viewport=(0, 0, fbw, fbh), components=3, alignment=1)
@@ -1005,7 +911,7 @@ class Viewer:
             self.show_help = not self.show_help
         if n == 60 and self.panel is not None:  # "max error": measured in steps, then applied
             self.panel.max_error_on = True
-            self._quality_update()
+            self.max_error.update()
         if n % 170 == 85:  # the debug views too (their textures must not pile up)
             c.key("v")
             self._view_changed()
@@ -1026,12 +932,10 @@ class Viewer:
             except Exception:
                 pass
             self._imgui_ready = False
-        if self.quality_job is not None:
-            try:
-                self.quality_job.close()
-            except Exception:
-                pass
-            self.quality_job = None
+        try:
+            self.max_error.close()
+        except Exception:
+            pass
         self._release_debug()
         for obj in (self.prog, self.renderer):
             if obj is not None:
@@ -1050,59 +954,3 @@ class Viewer:
             glfw.destroy_window(self.window)
             self.window = None
         glfw.terminate()
-
-
-def help_text() -> str:
-    width = max(len(k) for k, _ in HELP_ALL)
-    return "\n".join(f"  {k:<{width}}  {v.replace('`', '')}" for k, v in HELP_ALL)
-
-
-def window_picture(view: str, raw: np.ndarray, width: int, height: int) -> np.ndarray:
-    """The window's picture of a debug view: uint8 (height, width, 3).  ``raw``
-    (viewer.views.raw_view, possibly smaller: scaled up to the window,
-    nearest pixel) coloured as ``glassray render --view`` does
-    (viewer.views.picture); a legend strip (depth, cost) replaces the
-    picture's bottom rows, so that the view keeps the image's framing."""
-    h, w = raw.shape[:2]
-    if (w, h) != (width, height):
-        ys = np.arange(height) * h // height
-        xs = np.arange(width) * w // width
-        raw = raw[ys][:, xs]
-    pic = picture(view, raw)
-    if pic.shape[0] > height:
-        legend = pic[height:]
-        pic = (np.concatenate([pic[:height - legend.shape[0]], legend]) if height >= 2 * legend.shape[0]
-               else pic[:height])
-    return np.round(255 * pic).astype(np.uint8)
-
-
-_GL_IS = (("buffers", "glIsBuffer"), ("textures", "glIsTexture"), ("framebuffers", "glIsFramebuffer"),
-          ("vertex_arrays", "glIsVertexArray"), ("programs", "glIsProgram"), ("shaders", "glIsShader"),
-          ("renderbuffers", "glIsRenderbuffer"), ("samplers", "glIsSampler"), ("queries", "glIsQuery"))
-
-
-def gl_object_counts(ctx: moderngl.Context, prog: Progressive) -> dict[str, int]:
-    """How many GL objects of each kind exist in the current context
-    (glIs* over every name up to a little past the newest one).  For the
-    soak test: the counts must stay flat."""
-    proto = ctypes.CFUNCTYPE(ctypes.c_ubyte, ctypes.c_uint)
-    probes = [ctx.buffer(reserve=4), ctx.texture((1, 1), 4)]
-    probes.append(ctx.framebuffer(color_attachments=[probes[1]]))
-    probes.append(ctx.vertex_array(prog.program, []))
-    upper = max(p.glo for p in probes) + 256
-    upper = max(upper, prog.program.glo + 256)
-    counts = {}
-    try:
-        for kind, fname in _GL_IS:
-            addr = glfw.get_proc_address(fname)
-            if not addr:
-                continue
-            fn = proto(addr)
-            counts[kind] = sum(1 for name in range(1, upper) if fn(name))
-    finally:
-        for p in reversed(probes):
-            p.release()
-    for kind in ("buffers", "textures", "framebuffers", "vertex_arrays"):  # less the probes
-        if kind in counts:
-            counts[kind] -= 1
-    return counts
