@@ -248,7 +248,8 @@ def test_viewer_session(xdisplay, tmp_path, gl):
 
     shaders = tmp_path / "shaders"  # a copy, so that the test can break a shader
     shutil.copytree(shader_root(), shaders)
-    v = Viewer(xdisplay, run_dir, str(scene_file), "--size", f"{SIZE[0]}x{SIZE[1]}", "--no-vsync",
+    # --no-watch: this story reloads with F5 (test_the_viewer_follows_the_scene_file: without)
+    v = Viewer(xdisplay, run_dir, str(scene_file), "--size", f"{SIZE[0]}x{SIZE[1]}", "--no-vsync", "--no-watch",
                env={"GLASSRAY_SHADERS": str(shaders)})
     try:
         scene = load_e2e_scene(scene_file)
@@ -362,6 +363,115 @@ def test_viewer_session(xdisplay, tmp_path, gl):
         # 10. Esc quits with status 0
         assert v.quit() == 0
         assert not any("Traceback" in e for e in v.stderr), "\n".join(v.stderr)
+    finally:
+        v.close()
+
+
+def blue_ball(img) -> bool:
+    b = img.astype(int)
+    return bool(((b[..., 2] > b[..., 0] + 60) & (b[..., 2] > 100)).sum() > 200
+                and not ((b[..., 0] > b[..., 2] + 60) & (b[..., 0] > 100)).any())
+
+
+def wait_for(v: Viewer, what: str, timeout: float = 15) -> float:
+    """Seconds until the viewer prints the line `what` (stdout)."""
+    t0 = time.monotonic()
+    while v.next_line(timeout) != what:
+        pass
+    return time.monotonic() - t0
+
+
+def title(v: Viewer) -> str:
+    return v.xdo("getwindowname", v.wid).strip()
+
+
+def test_the_viewer_follows_the_scene_file(xdisplay, tmp_path, gl):
+    """Live reload: a save in place, and a write-and-rename as vim and VS
+    Code do, reload without a key; a broken save keeps the picture and shows
+    the error in the window until a good save clears it; a broken shader's
+    message keeps its file:line; the idle window stays idle while it
+    watches.  Without ImGui, so that the HUD is the window title."""
+    scene_file = tmp_path / "live.toml"
+    scene_file.write_text(SCENE)
+    run_dir = tmp_path / "run"
+    run_dir.mkdir()
+    from viewer.gpu.shaders import shader_root
+
+    shaders = tmp_path / "shaders"
+    shutil.copytree(shader_root(), shaders)
+    v = Viewer(xdisplay, run_dir, str(scene_file), "--size", f"{SIZE[0]}x{SIZE[1]}", "--no-vsync",
+               env={"GLASSRAY_NO_IMGUI": "1", "GLASSRAY_SHADERS": str(shaders)})
+    try:
+        first = v.shot()
+        assert_same_picture(first, offscreen(gl, load_e2e_scene(scene_file)))
+        # 1. a save in place: reloaded without a key press
+        scene_file.write_text(SCENE.replace("[0.9, 0.1, 0.1]", "[0.1, 0.1, 0.9]"))
+        latency = wait_for(v, "reloaded")
+        blue = v.shot()
+        assert blue_ball(blue) and latency < 5, latency
+        assert_same_picture(blue, offscreen(gl, load_e2e_scene(scene_file)))
+        # 2. written to another name and renamed over it: reloaded too
+        tmp = tmp_path / ".live.toml.swp"
+        tmp.write_text(SCENE.replace("radius = 0.5", "radius = 0.3"))
+        os.replace(tmp, scene_file)
+        wait_for(v, "reloaded")
+        small = v.shot()
+        assert_same_picture(small, offscreen(gl, load_e2e_scene(scene_file)))
+        assert mismatch(small, first) > 0.005
+        # 3. a broken save: the picture stays, the error stays in the window
+        scene_file.write_text(SCENE.replace("radius = 0.5", "radius = -1"))
+        deadline = time.monotonic() + 15
+        while not any("reload failed" in e for e in v.stderr) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert any("reload failed" in e and "radius" in e for e in v.stderr), v.stderr
+        assert_same_picture(v.shot(), small)
+        time.sleep(1.5)                               # longer than a HUD message stays
+        shown = title(v)
+        assert "reload failed" in shown and "objects[1].radius" in shown, shown
+        # 4. the scene good again, a shader broken: the window names the file and line
+        scene_file.write_text(SCENE.replace("radius = 0.5", "radius = 0.3"))
+        render = shaders / "render.frag"
+        good = render.read_text()
+        render.write_text(good + "\nthis is not GLSL;\n")
+        deadline = time.monotonic() + 20
+        while "render.frag:" not in title(v) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert "render.frag:" in title(v), title(v)
+        # 5. good again: reloaded, the error gone from the window
+        render.write_text(good)
+        scene_file.write_text(SCENE)
+        wait_for(v, "reloaded", timeout=30)
+        assert_same_picture(v.shot(), first)
+        deadline = time.monotonic() + 5
+        while "reload failed" in title(v) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert "reload failed" not in title(v), title(v)
+        # 6. watching costs an idle window next to nothing
+        time.sleep(0.5)
+        c0 = v.cpu_seconds()
+        time.sleep(2.0)
+        idle = v.cpu_seconds() - c0
+        print(f"live reload: {latency:.2f} s from save to reloaded; idle CPU {idle / 2.0:.1%} watching "
+              f"{1 + len(list(shaders.rglob('*.glsl')))}+ files")
+        assert idle < 0.2, f"the watching viewer used {idle:.2f} s of CPU in 2 s idle"
+        assert v.quit() == 0
+    finally:
+        v.close()
+
+
+def test_no_watch_leaves_the_scene_until_f5(xdisplay, tmp_path):
+    scene_file = tmp_path / "still.toml"
+    scene_file.write_text(SCENE)
+    v = Viewer(xdisplay, tmp_path, str(scene_file), "--size", "160x90", "--no-vsync", "--no-watch")
+    try:
+        before = v.shot()
+        scene_file.write_text(SCENE.replace("[0.9, 0.1, 0.1]", "[0.1, 0.1, 0.9]"))
+        time.sleep(1.5)
+        assert_same_picture(v.shot(), before)
+        v.key("F5")
+        wait_for(v, "reloaded")
+        assert blue_ball(v.shot())
+        assert v.quit() == 0
     finally:
         v.close()
 

@@ -56,6 +56,15 @@ def shader_root() -> Path:
     return Path(__file__).resolve().parents[2] / "shaders"      # the repository (editable install)
 
 
+def shaders_editable() -> bool:
+    """Whether shader_root() is a folder someone edits (GLASSRAY_SHADERS, or
+    the repository's shaders/ of an editable install), not the copy inside
+    an installed wheel: the viewer watches it for live reload then."""
+    if os.environ.get("GLASSRAY_SHADERS"):
+        return True
+    return shader_root().name == "shaders"
+
+
 class ShaderFiles:
     """The shader folder's sources, read once, when made.  A renderer
     compiles every later variant of its program (culling subsets, debug
