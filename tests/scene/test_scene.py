@@ -1145,7 +1145,7 @@ def test_save_fails_before_writing_if_the_scene_cannot_be_serialised(tmp_path, m
     def boom(scene, *args, **kwargs):
         raise RuntimeError("serialiser broke")
 
-    monkeypatch.setattr(scene_save, "scene_to_toml", boom)
+    monkeypatch.setattr(scene_save, "scene_file_text", boom)
     with pytest.raises(RuntimeError):
         save_scene(load_scene(None), target)
     assert target.read_bytes() == OLD

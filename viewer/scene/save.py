@@ -5,8 +5,13 @@ from __future__ import annotations
 import os
 from pathlib import Path
 from typing import Any
+
+import tomli_w
+import tomlkit
+
 from ..base.files import write_atomic
-from .model import Scene, Sky
+from .load import scene_from_toml
+from .model import Material, Scene, SceneError, Sky
 
 
 # --------------------------------------------------------------------------- saving
@@ -119,13 +124,115 @@ def scene_to_dict(scene: Scene, dest: Path | None = None) -> dict:
 
 
 def scene_to_toml(scene: Scene, dest: Path | None = None) -> str:
-    import tomli_w
-
+    """Every value of the scene as TOML, in one fixed form (the digests that
+    key caches read it: the same scene, the same text)."""
     return tomli_w.dumps(scene_to_dict(scene, dest))
 
 
+# --------------------------------------------------------------------------- the file a user keeps
+
+
+def _inline(value: Any) -> Any:
+    """A value as tomlkit writes it: vectors (lists of numbers) on one line."""
+    if isinstance(value, list) and all(isinstance(v, (int, float)) for v in value):
+        arr = tomlkit.array()
+        arr.extend(value)
+        return arr
+    if isinstance(value, dict):
+        return {k: _inline(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_inline(v) for v in value]
+    return value
+
+
+def _is_table_list(value: Any) -> bool:
+    return isinstance(value, list) and bool(value) and all(isinstance(v, dict) for v in value)
+
+
+def _edit(container, before: dict, after: dict) -> None:
+    """Change `container` (a tomlkit table of the user's file, which said
+    `before`) so that it says `after`, touching only what differs: a table
+    or an array of tables of the same length is edited inside (its comments
+    and order stay), any other changed value is rewritten, a key gone from
+    `after` is removed."""
+    for key, new in after.items():
+        old = before.get(key)
+        if key in before and old == new:
+            continue
+        here = container.get(key) if key in container else None
+        if isinstance(new, dict) and isinstance(old, dict) and isinstance(here, dict):
+            _edit(here, old, new)
+        elif (_is_table_list(new) and _is_table_list(old) and len(new) == len(old)
+              and isinstance(here, list) and len(here) == len(new)):
+            for item, o, n in zip(here, old, new):
+                if o != n:
+                    _edit(item, o, n)
+        else:
+            item = tomlkit.item(_inline(new))
+            trivia = getattr(here, "trivia", None)
+            if trivia is not None and trivia.comment and hasattr(item, "trivia"):
+                # `fov = 40  # wide`: the comment stays with its value
+                item.trivia.comment_ws, item.trivia.comment = trivia.comment_ws, trivia.comment
+            container[key] = item
+    for key in list(before):
+        if key not in after and key in container:
+            del container[key]
+
+
+def _defaults_left_out(d: dict) -> dict:
+    """A new file's document: the values that differ from the format's
+    defaults (an empty table left out too)."""
+    base = scene_to_dict(Scene(name=d.get("name", "scene")))
+    out: dict[str, Any] = {}
+    for key, value in d.items():
+        if key in ("camera", "render", "sky"):
+            table = {k: v for k, v in value.items() if base[key].get(k) != v}
+            if table:
+                out[key] = table
+        elif key == "ambient":
+            if value != base["ambient"]:
+                out[key] = value
+        elif key == "materials":
+            plain = {k: v for k, v in scene_to_dict(Scene(name="m", materials={"m": Material()}))["materials"]["m"].items()}
+            out[key] = {name: {k: v for k, v in m.items() if k == "color" or plain.get(k) != v} for name, m in value.items()}
+        elif key == "lights":
+            out[key] = [{k: v for k, v in lt.items() if not (k == "color" and v == [1.0, 1.0, 1.0])
+                         and not (k == "intensity" and v == 1.0)} for lt in value]
+        elif key == "objects":
+            out[key] = [{k: v for k, v in o.items() if not (k == "rotate" and v == [0.0, 0.0, 0.0])} for o in value]
+        else:
+            out[key] = value
+    return out
+
+
+def scene_file_text(scene: Scene, dest: Path | None = None) -> str:
+    """The text save_scene writes to `dest`.  For a scene read from a file
+    (scene.path) that is still there, that file's text with only the values
+    that changed rewritten: its comments, order and formatting stay, and an
+    unedited scene gives back its own text.  Otherwise a new file: the
+    values that differ from the defaults, vectors on one line."""
+    after = scene_to_dict(scene, dest)
+    source = Path(scene.path) if scene.path is not None else None
+    text = None
+    if source is not None:
+        try:
+            text = source.read_text(encoding="utf-8")
+            # the file as its own loader reads it (relative pictures from its folder)
+            original = scene_from_toml(text, source=str(source), base_dir=source.parent.resolve(),
+                                       default_name=source.stem)
+            original.path = source
+            doc = tomlkit.parse(text.removeprefix("\ufeff"))
+        except (OSError, UnicodeDecodeError, SceneError, tomlkit.exceptions.TOMLKitError):
+            text = None
+    if text is None:
+        return tomlkit.dumps(_inline(_defaults_left_out(after)))
+    before = scene_to_dict(original, source)
+    _edit(doc, before, after)
+    return tomlkit.dumps(doc)
+
 
 def save_scene(scene: Scene, path: Path) -> None:
-    write_atomic(Path(path), scene_to_toml(scene, Path(path)).encode("utf-8"))
+    """Write the scene to `path` atomically (scene_file_text says what)."""
+    write_atomic(Path(path), scene_file_text(scene, Path(path)).encode("utf-8"))
 
 
