@@ -246,7 +246,7 @@ def test_values_left_alone_keep_their_value_and_edited_ones_are_saved_as_shown(s
     assert panel.save(scene)
     text = (tmp_path / "s.toml").read_text()
     flat = " ".join(text.split())
-    assert "min_weight = 0.002 " in flat and "[camera] position = [ 3.5, 2.2, 4.6, ]" in flat, flat
+    assert "min_weight = 0.002 " in flat and "[camera] position = [3.5, 2.2, 4.6]" in flat, flat   # as typed, on one line
 
 
 # ------------------------------------------------------------ add, remove, save

@@ -22,6 +22,7 @@ import os
 import re
 import sys
 import time
+import tomllib
 import traceback
 from dataclasses import fields
 from pathlib import Path
@@ -60,6 +61,16 @@ IDLE_WAKE_S = 0.5
 WATCH_WAKE_S = 0.2
 #: How long a HUD message stays.
 MESSAGE_S = 4.0
+
+
+def _has_camera_table(scene: Scene) -> bool:
+    """Whether the file a scene came from has its own [camera] table."""
+    if scene.path is None:
+        return True
+    try:
+        return "camera" in tomllib.loads(Path(scene.path).read_text(encoding="utf-8").removeprefix("\ufeff"))
+    except (OSError, ValueError):
+        return True
 
 
 def run(args, load) -> int:
@@ -105,6 +116,7 @@ class Viewer:
         self.max_error = MaxError(self)     # the panel's "max error" (window/max_error.py)
         self.watcher: FileWatcher | None = None   # live reload (--watch, on by default)
         self.reload_error = ""              # the last failed reload's message, shown until a good one
+        self.open_request: str | None = None    # a scene to open at the next frame (a drop)
         self.debug_tex = self.debug_fbo = None
         self._errors = init_glfw()
         try:
@@ -220,6 +232,7 @@ class Viewer:
         glfw.set_window_refresh_callback(win, self._on_refresh)
         glfw.set_window_focus_callback(win, self._on_focus)
         glfw.set_cursor_enter_callback(win, self._on_cursor_enter)
+        glfw.set_drop_callback(win, self._on_drop)
 
     def _title(self, scene: Scene) -> str:
         return f"glassray - {scene.name}"
@@ -323,6 +336,15 @@ class Viewer:
     def _on_focus(self, win, focused):
         if self._imgui_ready:
             self.imgui.backends.glfw_window_focus_callback(self._addr, int(focused))
+        self.ui_frames = max(self.ui_frames, 1)
+
+    def _on_drop(self, win, paths):
+        """Files dropped on the window: the first .toml is opened (next frame)."""
+        scenes = [p for p in paths if str(p).lower().endswith(".toml")]
+        if scenes:
+            self.open_request = str(scenes[0])
+        else:
+            self.say(f"not a scene file (.toml): {Path(paths[0]).name}" if paths else "nothing dropped", error=True)
         self.ui_frames = max(self.ui_frames, 1)
 
     def _on_cursor_enter(self, win, entered):
@@ -482,6 +504,9 @@ class Viewer:
 
         actions, self.actions = self.actions, []
         want_shot = self._take_actions(actions)
+        if self.open_request is not None:
+            request, self.open_request = self.open_request, None
+            self.open_scene(request)
         ui = self._imgui_ready
         if ui:
             self._ui_new_frame()
@@ -573,6 +598,8 @@ class Viewer:
             self.prog.target_ms = self.panel.target_ms
         if res.adaptive_changed:
             self._set_adaptive(self.panel.adaptive)
+        if res.open_path:
+            self.open_scene(res.open_path)
 
     def _trace(self, t0: float, fbw: int, fbh: int) -> tuple[bool, bool, bool]:
         """Trace this frame's share: a preview right after a change,
@@ -840,6 +867,54 @@ class Viewer:
         self.reload_error = ""
         self.say("reloaded scene and shaders" if shaders else "reloaded the scene")
         print("reloaded", flush=True)
+
+    def open_scene(self, spec: str) -> bool:
+        """Show another scene: a file (dropped on the window, or typed in the
+        panel) or a built-in scene's name, with the command line's overrides.
+        Its camera is its file's when the file has a [camera] table; without
+        one the view stays where it is.  From now on F5 and the watcher
+        follow that file.  A scene that cannot be opened leaves the shown
+        one as it was, and says why."""
+        args = copy.copy(self.args)
+        args.scene = spec
+        try:
+            fresh = self.loader(args)
+        except SceneError as e:
+            self.error(f"cannot open {spec}: {e}")
+            return False
+        scene = copy.deepcopy(fresh)
+        if not _has_camera_table(fresh):
+            scene.camera = copy.deepcopy(self.scene.camera)
+        try:
+            self.renderer.set_scene(scene)      # compiles when its features differ
+        except Exception as e:
+            self.renderer.set_scene(self.scene)
+            self.error(f"cannot open {spec}: {e}")
+            return False
+        self.args = args
+        self.scene = scene
+        self.file_scene = copy.deepcopy(fresh)
+        self.good_scene = copy.deepcopy(scene)
+        self.reload_error = ""
+        self.controls.rebase(scene, start=scene)
+        if self.panel is not None:
+            self.panel.error = ""
+            self.panel.scene_opened(scene)
+        if self.watcher is not None:
+            self.watcher.watch(self._watched_files())
+        self._warn_one_draw()
+        self.prog.restart()
+        glfw.set_window_title(self.window, self._title(scene))
+        self.debug_dirty = True
+        if self.max_error.on:
+            self.max_error.close()
+            self.max_error.parts = None
+            self.max_error.update()
+        self.need_preview = True
+        self.last_change = time.perf_counter()
+        self.say(f"opened {scene.name}")
+        print(f"opened {scene.path or spec}", flush=True)
+        return True
 
     def _reload_failed(self, text: str) -> None:
         """Say why (stderr, the panel), and keep it in the HUD until a reload

@@ -75,6 +75,7 @@ class PanelResult:
     quality_changed: bool = False  # "max error" switched or its value changed
     remeasure: bool = False  # "measure again" pressed
     adaptive_changed: bool = False  # "adaptive" switched (Panel.adaptive)
+    open_path: str | None = None  # "Open" pressed: the scene file or built-in name typed
 
 
 class Panel:
@@ -82,6 +83,7 @@ class Panel:
 
     def __init__(self, scene: Scene, target_ms: float = 33.0):
         self.save_path = self.default_save_path(scene)
+        self.open_path = ""  # the "Open" field: a scene file or a built-in scene's name
         self.status = ""  # last save result
         self.error = ""  # last reload / shader error
         self.target_ms = float(target_ms)
@@ -105,6 +107,13 @@ class Panel:
     def _open(self) -> None:
         if self.open_all:
             imgui.set_next_item_open(True, imgui.Cond_.always)
+
+    def scene_opened(self, scene: Scene) -> None:
+        """Another scene replaced the one shown (opened, or dropped on the
+        window): its own save path and sky picture box."""
+        self.save_path = self.default_save_path(scene)
+        self.sky_image, self.sky_note, self.edit_note = scene.sky.image or "", "", ""
+        self.status = f"opened {scene.name}"
 
     @staticmethod
     def default_save_path(scene: Scene) -> str:
@@ -164,6 +173,10 @@ class Panel:
         imgui.same_line()
         if imgui.button("Save scene"):
             self.save(scene)
+        _, self.open_path = imgui.input_text("##openpath", self.open_path)
+        imgui.same_line()
+        if imgui.button("Open scene") and self.open_path.strip():
+            res.open_path = self.open_path.strip()
         if self.status:
             imgui.text_wrapped(self.status)
         if self.edit_note:  # an edit refused (it would make a scene the format rejects)
