@@ -59,6 +59,8 @@ IDLE_WAKE_S = 0.5
 #: ... and this often while it watches files for live reload (s): a save is
 #: seen within about this long (window/watch.py).
 WATCH_WAKE_S = 0.2
+#: The HUD's fps and frame time are means over this long (s).
+FPS_WINDOW_S = 0.5
 #: How long a HUD message stays.
 MESSAGE_S = 4.0
 
@@ -165,7 +167,9 @@ class Viewer:
         self._warn_one_draw()
         self.frame_ms = 0.0
         self.fps = 0.0
+        self.work_ms = 0.0      # a drawn frame's mean time in the loop, over the same window as fps
         self._fps_count = 0
+        self._work_sum_ms = 0.0
         self._fps_t0 = time.perf_counter()
         self.overhead_ms = 3.0
         self._title_t = 0.0
@@ -679,9 +683,20 @@ class Viewer:
         if traced:
             self.overhead_ms = 0.8 * self.overhead_ms + 0.2 * max(0.0, self.frame_ms - trace_ms)
         self._fps_count += 1
-        if t1 - self._fps_t0 >= 0.5:
+        self._work_sum_ms += self.frame_ms
+        if t1 - self._fps_t0 >= FPS_WINDOW_S:
+            # both numbers of the HUD's line over the same frames: the rate
+            # frames were drawn at, and what each took on average
             self.fps = self._fps_count / (t1 - self._fps_t0)
-            self._fps_count, self._fps_t0 = 0, t1
+            self.work_ms = self._work_sum_ms / self._fps_count
+            self._fps_count, self._work_sum_ms, self._fps_t0 = 0, 0.0, t1
+
+    def _rate_line(self) -> str:
+        """The HUD's timing: frames drawn per second and a frame's mean time,
+        both over the last FPS_WINDOW_S (before the first window closes,
+        the last frame's time)."""
+        work = self.work_ms if self.fps > 0 else self.frame_ms
+        return f"{self.fps:.0f} fps, {work:.1f} ms a frame"
 
     def _hud_lines(self) -> list[str]:
         q = [self.max_error.status] if self.max_error.on and self.max_error.status else []
@@ -689,7 +704,7 @@ class Viewer:
             q.append(self.reload_error)
         if self.controls.view != "image":
             rw, rh = self.debug_res or self.prog.size
-            return [f"{self.frame_ms:.1f} ms  {self.fps:.0f} fps",
+            return [self._rate_line(),
                     f"view: {VIEW_NAMES.get(self.controls.view, self.controls.view)}  (V: next)",
                     f"{rw}x{rh}" + (" (preview)" if (rw, rh) != self.prog.size else ""),
                     f"max depth {self.scene.render.max_depth}", *q]
@@ -705,7 +720,7 @@ class Viewer:
         # once every sample is in, the viewer draws nothing more: a rate of
         # frames would stay on screen, stale (it read 22 fps long after)
         timing = (f"idle (last frame {self.frame_ms:.1f} ms)" if self.prog.done and not preview
-                  else f"{self.frame_ms:.1f} ms  {self.fps:.0f} fps")
+                  else self._rate_line())
         return [timing,
                 f"{rw}x{rh}" + (" (preview)" if preview else ""),
                 samples,

@@ -62,6 +62,8 @@ VIEWS = ("image", "cost", "normals", "depth", "objects")
 EXTRA_HELP = [
     ("V (shift+V: back)", "cycle the view: image, cost (rays traced per pixel, with a legend), normals, "
                           "depth, objects (the first hit's normal, distance, object); the HUD names it"),
+    ("middle-drag", "pan, as right-drag"),
+    ("drop a .toml file", "open that scene (its camera if the file has one, else the view stays)"),
 ]
 
 #: Everything the help overlay lists.
@@ -145,7 +147,7 @@ class Controls:
             return
         if button == "left":
             self._drag = "pan" if shift else "orbit"
-        elif button == "right":
+        elif button in ("right", "middle"):      # middle-drag pans, as in Blender and most 3D tools
             self._drag = "pan"
         else:
             return
