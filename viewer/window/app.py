@@ -42,6 +42,7 @@ from ..gpu.renderer import Renderer
 from ..gpu.shaders import shader_root, shaders_editable
 from ..scene.model import Scene, SceneError
 from .controls import Controls, merge_reloaded
+from .history import EditHistory
 from .hud import VIEW_NAMES, help_text, window_picture
 from .max_error import MaxError
 from .progressive import Progressive
@@ -119,6 +120,7 @@ class Viewer:
         self.watcher: FileWatcher | None = None   # live reload (--watch, on by default)
         self.reload_error = ""              # the last failed reload's message, shown until a good one
         self.open_request: str | None = None    # a scene to open at the next frame (a drop)
+        self.history = EditHistory()        # undo / redo of the panel's edits (window/history.py)
         self.debug_tex = self.debug_fbo = None
         self._errors = init_glfw()
         try:
@@ -279,7 +281,8 @@ class Viewer:
     def _shortcut(self, name: str, mods: int, action: int) -> None:
         if name in "123456789" and action == glfw.PRESS and self.max_error.on:
             self.max_error.off("max error off: max depth set by key")
-        act = self.controls.key(name, shift=bool(mods & glfw.MOD_SHIFT), repeat=action == glfw.REPEAT)
+        act = self.controls.key(name, shift=bool(mods & glfw.MOD_SHIFT), repeat=action == glfw.REPEAT,
+                                ctrl=bool(mods & glfw.MOD_CONTROL))
         if act is not None:
             self.actions.append(act)
 
@@ -553,6 +556,8 @@ class Viewer:
                 want_shot += 1
             elif act == "view":
                 self._view_changed()
+            elif act in ("undo", "redo"):
+                self.undo(redo=act == "redo")
             elif act == "screenshot_window":
                 # ImGui shows a window that just opened one frame later: let the
                 # overlays settle for a frame, then read the window back
@@ -588,7 +593,10 @@ class Viewer:
         ds = imgui.get_io().display_size
         self.panel.view = self.controls.view
         self.panel.quality_status = self.max_error.status
+        self.history.at_rest(self.scene)
         res = self.panel.draw(self.scene, (ds.x, ds.y))
+        self.history.after_panel(self.scene, changed=res.changed or res.camera_changed,
+                                 active=imgui.is_any_item_active())
         if res.view_changed:
             self.controls.set_view(self.panel.view)
             self._view_changed()
@@ -880,8 +888,22 @@ class Viewer:
         self.need_preview = True
         self.last_change = time.perf_counter()
         self.reload_error = ""
+        self.history.clear()                # its edits were of the scene before
         self.say("reloaded scene and shaders" if shaders else "reloaded the scene")
         print("reloaded", flush=True)
+
+    def undo(self, redo: bool = False) -> bool:
+        """Ctrl+Z (redo: Ctrl+Shift+Z, Ctrl+Y): put back the parts of the
+        scene the last panel edit changed (window/history.py)."""
+        edit = self.history.redo(self.scene) if redo else self.history.undo(self.scene)
+        if edit is None:
+            self.say("nothing to redo" if redo else "nothing to undo")
+            return False
+        if "camera" in edit.parts:
+            self.controls.camera_edited()
+        self.controls.changed = True
+        self.say(f"{'redone' if redo else 'undone'}: {', '.join(edit.parts)}")
+        return True
 
     def open_scene(self, spec: str) -> bool:
         """Show another scene: a file (dropped on the window, or typed in the
@@ -911,6 +933,7 @@ class Viewer:
         self.file_scene = copy.deepcopy(fresh)
         self.good_scene = copy.deepcopy(scene)
         self.reload_error = ""
+        self.history.clear()
         self.controls.rebase(scene, start=scene)
         if self.panel is not None:
             self.panel.error = ""

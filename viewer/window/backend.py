@@ -27,7 +27,7 @@ import glfw  # noqa: E402
 import moderngl  # noqa: E402
 
 #: GLFW's keys and mouse buttons by the names viewer/window/controls.py binds.
-KEYS = {getattr(glfw, f"KEY_{c.upper()}"): c for c in "wsadqerphv"}
+KEYS = {getattr(glfw, f"KEY_{c.upper()}"): c for c in "wsadqerphvzy"}
 KEYS.update({getattr(glfw, f"KEY_{d}"): str(d) for d in range(1, 10)})
 KEYS.update({getattr(glfw, f"KEY_KP_{d}"): str(d) for d in range(1, 10)})
 KEYS.update({glfw.KEY_TAB: "tab", glfw.KEY_F1: "f1", glfw.KEY_F5: "f5", glfw.KEY_F12: "f12",

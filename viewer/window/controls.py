@@ -30,6 +30,9 @@ LIGHT_FAST = 5.0
 #: Light keys: key -> (axis, sign): W/S -z/+z, A/D -x/+x, Q/E -y/+y.
 LIGHT_KEYS = {"w": (2, -1.0), "s": (2, 1.0), "a": (0, -1.0), "d": (0, 1.0), "q": (1, -1.0), "e": (1, 1.0)}
 
+#: With Ctrl held: (key, shift) -> the action (undo and redo of the panel's edits).
+CTRL_ACTIONS = {("z", False): "undo", ("z", True): "redo", ("y", False): "redo"}
+
 #: Keys that the window handles (they return an action name from Controls.key).
 ACTIONS = {"p": "screenshot", "f12": "screenshot_window", "tab": "toggle_panel", "f5": "reload",
            "h": "help", "f1": "help", "escape": "quit"}
@@ -63,6 +66,7 @@ EXTRA_HELP = [
     ("V (shift+V: back)", "cycle the view: image, cost (rays traced per pixel, with a legend), normals, "
                           "depth, objects (the first hit's normal, distance, object); the HUD names it"),
     ("middle-drag", "pan, as right-drag"),
+    ("Ctrl+Z / Ctrl+Shift+Z or Ctrl+Y", "undo / redo the settings panel's edits"),
     ("drop a .toml file", "open that scene (its camera if the file has one, else the view stays)"),
 ]
 
@@ -203,12 +207,15 @@ class Controls:
 
     # ------------------------------------------------------------ keys
 
-    def key(self, name: str, shift: bool = False, repeat: bool = False) -> str | None:
+    def key(self, name: str, shift: bool = False, repeat: bool = False, ctrl: bool = False) -> str | None:
         """Handle a key press (``repeat``: the key is held).  Returns the
         name of an action the window must carry out (``"screenshot"``,
         ``"screenshot_window"``, ``"toggle_panel"``, ``"reload"``, ``"help"``,
-        ``"quit"``, ``"view"`` after V changed :attr:`view`) or None."""
+        ``"quit"``, ``"view"`` after V changed :attr:`view`; with ``ctrl``
+        ``"undo"`` or ``"redo"``, CTRL_ACTIONS) or None."""
         name = name.lower()
+        if ctrl:
+            return None if repeat else CTRL_ACTIONS.get((name, shift))
         if name in LIGHT_KEYS:
             axis, sign = LIGHT_KEYS[name]
             self.move_light(axis, sign * (LIGHT_FAST if shift else 1.0))
