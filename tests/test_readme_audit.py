@@ -5,7 +5,7 @@
 - every ``(#anchor)`` link matches a heading by GitHub's slug rules;
 - every ``glassray ...`` command shown (``sh`` blocks and inline code) names a
   subcommand, and every ``--flag`` it uses is an option of that subcommand in
-  viewer/cli.py's parser; a complete command (no placeholder such as
+  viewer/cli/'s parser; a complete command (no placeholder such as
   ``[SCENE]``, ``OUT`` or ``E``) is parsed whole, values included;
 - the flags listed in the prose for one subcommand ("Options of `render`",
   the Benchmark and Numerical stability sections) are that subcommand's;
@@ -37,10 +37,9 @@ SPEC_CLI = ROOT / "docs" / "cli.md"          # the spec's copy shipped with the 
 SUBCOMMANDS = ("view", "render", "check", "bench", "stress")
 
 
-#: The project's own long-form documents, which the README links to and
-#: which get the same checks as the README (docs/cli.md and
-#: docs/scene-format.md are copies of the spec, checked against it elsewhere).
-DOCS = ("performance.md", "adaptive.md", "benchmark.md")
+#: The user's documents, which the README links to and which get the same
+#: checks as the README (docs/notes/ are lab notebooks, not checked).
+DOCS = ("cli.md", "api.md", "scene-format.md", "how-it-works.md", "performance.md", "accuracy.md", "design.md")
 
 
 @pytest.fixture(scope="module")
@@ -197,7 +196,7 @@ def check_commands(commands: list[tuple[int, str, bool]], parser=None) -> list[s
     parses whole (values in range, nothing left over).  Inline code that
     ends in an option names that option (`glassray bench --peer`): it is
     parsed without it."""
-    from viewer.cli import normalise_argv
+    from viewer.cli.commands import normalise_argv
 
     parser = parser or _parser()
     top = set(parser._option_string_actions)
@@ -253,8 +252,8 @@ def readme_commands(text: str) -> list[tuple[int, str]]:
 #: regex of where it ends, subcommand, required).  Spans inside that start
 #: with a command of their own are checked as commands instead.
 OPTION_REGIONS = (
-    (r"Options of `render`:", r"\n\n", "render", True),
-    (r"Options of `view`:", r"\n\n", "view", True),
+    (r"Options of `render`:", r"\n\n", "render", False),     # (docs/cli.md: tests/test_docs_cli.py)
+    (r"Options of `view`:", r"\n\n", "view", False),
     (r"Options: `--adaptive", r"\n\n", "render", False),        # Adaptive anti-aliasing
     (r"Other options: `--reference", r"\n\n", "bench", False),  # Benchmark
     (r"It writes `contact-sheet.png`", r"\n\n", "stress", False),  # Numerical stability
@@ -354,7 +353,7 @@ def test_every_anchor_link_matches_a_heading(readme):
 
 def test_every_glassray_command_shown_is_accepted_by_its_parser(readme):
     commands = readme_commands(readme)
-    assert len(commands) > 40            # the extraction found the README's commands
+    assert len(commands) > 12            # the extraction found the README's commands
     assert check_commands(commands) == []
 
 
@@ -438,8 +437,7 @@ def test_option_region_check_catches_a_flag_of_another_subcommand():
             "It writes `contact-sheet.png` (`--columns N`)\n")
     bad = check_option_regions(text)
     assert len(bad) == 3 and "--vsync" in bad[0] and "--no-vsync" in bad[1] and "--naive" in bad[2], bad
-    assert check_option_regions("Options of `view`: `--size WxH`.\n") == [
-        "README: no text matching 'Options of `render`:' (the list of render's options)"]
+    assert check_option_regions("Options of `view`: `--size WxH`.\n") == []     # the other lists are optional
 
 
 def test_flag_check_catches_an_unknown_flag_in_prose():
