@@ -63,7 +63,8 @@ def own_reference_path(name: str) -> Path:
 
 
 def references(names: list[str]) -> None:
-    from viewer.reference.trace import camera_rays, trace
+    from viewer.reference.camera import camera_rays
+    from viewer.reference.trace import trace
     from viewer.base.sampling import sample_offsets
 
     OUT.mkdir(parents=True, exist_ok=True)

@@ -233,7 +233,7 @@ def test_corner_directions_are_the_reference_camera_at_the_corners():
     top-left corner (offset (0, 0)) of pixel (i, j), and the last column
     and row are the bottom-right corners (offset (1, 1)) of the last
     pixels."""
-    from viewer.reference.trace import camera_rays
+    from viewer.reference.camera import camera_rays
 
     scene = load_scene("glass-sphere")
     w, h = 11, 7
@@ -261,7 +261,7 @@ def test_checker_cells_differ_where_a_grid_line_crosses_the_footprint():
     That includes pixels whose four corner colours agree (a square's corner
     poking in between them).  No flag at the sky, across objects, or on a
     plain material."""
-    from viewer.reference.trace import camera_rays
+    from viewer.reference.camera import camera_rays
 
     w, h = 24, 18            # large pixels: one of them has a square's corner poking in
     scene = make_scene(CHECKER_DOWN)
@@ -1777,7 +1777,8 @@ def test_the_rim_seen_edge_on_is_not_missed_by_agreeing_samples(renderer_for):
     before, 10 of the 23 such pixels stayed at 4 or 8 samples: checked.
     At 16 to 64 samples a line 1/25 of a pixel thick is still up to 0.04
     off: it falls between sample rows.)"""
-    from viewer.reference.trace import camera_rays, trace
+    from viewer.reference.camera import camera_rays
+    from viewer.reference.trace import trace
 
     r = renderer_for("default")
     scene = r.scene

@@ -86,7 +86,7 @@ def test_a_16_bit_colour_png_sky_keeps_all_16_bits(tmp_path, colour_type, channe
 
     # the reference tracer reads it the same way: a direction at a texel's
     # centre (u = (i + 0.5) / W, v = (j + 0.5) / H) sees that texel
-    from viewer.reference.trace import sky_radiance
+    from viewer.reference.sky import sky_radiance
 
     (tmp_path / "s.toml").write_text(SKY.format(name="deep.png"))
     scene = load_scene(tmp_path / "s.toml")

@@ -53,7 +53,7 @@ def test_timed_renders_do_not_remake_the_render_target(gl, monkeypatch):
 def _screen_coords(scene, width, height):
     """(H, W, 3): the screen position (x, y, 0) of each pixel centre's
     camera ray, from the float64 reference tracer's camera."""
-    from viewer.reference.trace import _camera_basis, camera_rays
+    from viewer.reference.camera import _camera_basis, camera_rays
 
     _, f, right, up, _ = _camera_basis(scene)
     _, d = camera_rays(scene, width, height)

@@ -14,7 +14,11 @@ import time
 import numpy as np
 import pytest
 
-from viewer.reference.trace import camera_rays, contains, first_hit, fresnel_dielectric, medium_at, refract, render_reference, trace
+from viewer.reference.camera import camera_rays
+from viewer.reference.optics import fresnel_dielectric, refract
+from viewer.reference.primitives import contains
+from viewer.reference.surfaces import first_hit, medium_at
+from viewer.reference.trace import render_reference, trace
 from viewer.scene.load import load_scene, scene_from_dict
 
 # --------------------------------------------------------------------------- helpers

@@ -8,7 +8,9 @@ import numpy as np
 import pytest
 
 from viewer.measure import reference_cache
-from viewer.reference.trace import camera_rays, pixel_rays, render_reference, render_reference_refined, trace
+from viewer.reference.camera import camera_rays, pixel_rays
+from viewer.reference.refine import render_reference_refined
+from viewer.reference.trace import render_reference, trace
 from viewer.base.sampling import sample_offsets
 from viewer.scene.load import load_scene
 
@@ -129,10 +131,10 @@ def test_workers_leave_ctrl_c_to_the_caller(scene, monkeypatch):
     import concurrent.futures
     import multiprocessing
 
-    from viewer.reference import trace as reference
+    from viewer.reference import refine
 
     with concurrent.futures.ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"),
-                                                initializer=reference._ignore_sigint) as pool:
+                                                initializer=refine._ignore_sigint) as pool:
         try:
             got = pool.submit(_interrupt_myself).result(timeout=60)
         except KeyboardInterrupt:     # the worker's, sent back: fail this test, not the session
@@ -148,4 +150,4 @@ def test_workers_leave_ctrl_c_to_the_caller(scene, monkeypatch):
 
     monkeypatch.setattr(concurrent.futures, "ProcessPoolExecutor", recording)
     render_reference_refined(scene, 8, 4, 4, 8, 1e-3, seed=2, workers=2)
-    assert made and made[0].get("initializer") is reference._ignore_sigint
+    assert made and made[0].get("initializer") is refine._ignore_sigint

@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from ..reference.trace import contains, rotation_matrix
+from ..reference.primitives import contains, rotation_matrix
 from ..scene.model import Material, Scene, SceneObject
 
 #: The peers ``glassray bench --peer`` knows

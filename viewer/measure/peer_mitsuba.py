@@ -61,7 +61,7 @@ import time
 import numpy as np
 
 from ..base import interrupt
-from ..reference.trace import rotation_matrix
+from ..reference.primitives import rotation_matrix
 from ..scene.model import Material, Scene, SceneObject
 from .kit import usable_cpus
 from .peer_check import PeerError, bounding_box, check_scene, is_black

@@ -17,7 +17,9 @@ import numpy as np
 from ..base import interrupt
 from ..base.sampling import sample_offsets
 from ..gpu.renderer import Renderer
-from ..reference.trace import camera_rays, render_reference_refined, trace
+from ..reference.camera import camera_rays
+from ..reference.refine import render_reference_refined
+from ..reference.trace import trace
 from ..scene.load import with_overrides
 from .digests import code_digest, scene_digest, shader_digest
 from .kit import REFERENCE_MAX_DEPTH, REFERENCE_MIN_WEIGHT, REFERENCE_SEED, usable_cpus
