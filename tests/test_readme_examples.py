@@ -245,7 +245,7 @@ def scene_claim_problems(rows: dict[str, str]) -> list[str]:
     s = load_scene("bench-opaque")
     row = rows["bench-opaque"]
     n = len(s.objects)
-    if f"ten objects with it" not in row or n != 10 or _count(s, lambda o, m: o.type != "plane") != 9:
+    if "ten objects with it" not in row or n != 10 or _count(s, lambda o, m: o.type != "plane") != 9:
         bad.append(f"bench-opaque: {n} objects")
     if _count(s, lambda o, m: m.reflectivity > 0 or m.transparency > 0):
         bad.append("bench-opaque: has reflection or glass")

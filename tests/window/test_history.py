@@ -11,7 +11,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-import pytest
 
 from viewer.scene.load import load_scene
 from viewer.window.controls import Controls

@@ -18,7 +18,6 @@ format's own camera validation, not from the scaled run itself."""
 
 from __future__ import annotations
 
-import math
 import shutil
 import time
 
