@@ -17,18 +17,14 @@ from __future__ import annotations
 
 import copy
 import ctypes
-import math
 import os
-import re
 import sys
 import time
-import tomllib
 import traceback
 from dataclasses import fields
-from pathlib import Path
 
 from . import backend  # first: it imports imgui-bundle before glfw (backend.py says why)
-from .backend import BUTTONS, KEYS, WindowError, create_window, gl_object_counts, init_glfw, no_window_message, rss_kb
+from .backend import WindowError, create_window, gl_object_counts, init_glfw, no_window_message, rss_kb
 
 import glfw  # noqa: E402  (after backend)
 import moderngl
@@ -39,15 +35,16 @@ from ..base.errors import Failure
 from ..base.views import raw_view
 from ..gpu.context import size_failure
 from ..gpu.renderer import Renderer
-from ..gpu.shaders import shader_root, shaders_editable
-from ..scene.model import Scene, SceneError
-from .controls import Controls, merge_reloaded
+from ..scene.model import Scene
+from .controls import Controls
 from .history import EditHistory
 from .hud import VIEW_NAMES, help_text, window_picture
+from .events import InputEvents
 from .max_error import MaxError
 from .progressive import Progressive
 from .screenshot import save_linear, save_rgb8
-from .watch import FileWatcher, shader_files
+from .soak import soak_step
+from .live import LiveScene
 
 #: After the last change, the view counts as still (full resolution) after this long.
 SETTLE_S = 0.12
@@ -55,25 +52,10 @@ SETTLE_S = 0.12
 DEFAULT_TARGET_MS = 33.0
 #: While samples accumulate, the window shows the progress this often (s).
 ACCUMULATE_DISPLAY_S = 0.25
-#: An idle viewer still wakes this often (s), so that Ctrl-C in its terminal ends it.
-IDLE_WAKE_S = 0.5
-#: ... and this often while it watches files for live reload (s): a save is
-#: seen within about this long (window/watch.py).
-WATCH_WAKE_S = 0.2
 #: The HUD's fps and frame time are means over this long (s).
 FPS_WINDOW_S = 0.5
 #: How long a HUD message stays.
 MESSAGE_S = 4.0
-
-
-def _has_camera_table(scene: Scene) -> bool:
-    """Whether the file a scene came from has its own [camera] table."""
-    if scene.path is None:
-        return True
-    try:
-        return "camera" in tomllib.loads(Path(scene.path).read_text(encoding="utf-8").removeprefix("\ufeff"))
-    except (OSError, ValueError):
-        return True
 
 
 def run(args, load) -> int:
@@ -100,7 +82,7 @@ def run(args, load) -> int:
         viewer.close()
 
 
-class Viewer:
+class Viewer(InputEvents):
     def __init__(self, args, scene: Scene, loader):
         self.args = args
         self.loader = loader  # args -> scene (scene file plus overrides), for F5
@@ -117,8 +99,7 @@ class Viewer:
         # not compile, a sky picture too large for the driver): close() then
         # met none of them and raised AttributeError, which hid the error
         self.max_error = MaxError(self)     # the panel's "max error" (window/max_error.py)
-        self.watcher: FileWatcher | None = None   # live reload (--watch, on by default)
-        self.reload_error = ""              # the last failed reload's message, shown until a good one
+        self.live: LiveScene | None = None  # the scene's files: reload, watch, open (window/live.py)
         self.open_request: str | None = None    # a scene to open at the next frame (a drop)
         self.history = EditHistory()        # undo / redo of the panel's edits (window/history.py)
         self.debug_tex = self.debug_fbo = None
@@ -191,8 +172,7 @@ class Viewer:
 
         self._setup_imgui()
         self._install_callbacks()
-        if getattr(self.args, "watch", True):
-            self.watcher = FileWatcher(self._watched_files())
+        self.live = LiveScene(self, watch=getattr(self.args, "watch", True))
         if self.imgui is None:
             print(f"glassray: the settings panel is not available ({self.imgui_error}); "
                   "install imgui-bundle for it. The HUD is in the window title.", file=sys.stderr)
@@ -226,138 +206,8 @@ class Viewer:
             self.imgui = None
             self.panel = None
 
-    def _install_callbacks(self) -> None:
-        win = self.window
-        glfw.set_key_callback(win, self._on_key)
-        glfw.set_char_callback(win, self._on_char)
-        glfw.set_mouse_button_callback(win, self._on_mouse_button)
-        glfw.set_cursor_pos_callback(win, self._on_cursor_pos)
-        glfw.set_scroll_callback(win, self._on_scroll)
-        glfw.set_window_size_callback(win, self._on_window_size)
-        glfw.set_framebuffer_size_callback(win, self._on_framebuffer_size)
-        glfw.set_window_refresh_callback(win, self._on_refresh)
-        glfw.set_window_focus_callback(win, self._on_focus)
-        glfw.set_cursor_enter_callback(win, self._on_cursor_enter)
-        glfw.set_drop_callback(win, self._on_drop)
-
     def _title(self, scene: Scene) -> str:
         return f"glassray - {scene.name}"
-
-    # ------------------------------------------------------------ callbacks
-
-    def _ui_wants_mouse(self) -> bool:
-        return self._imgui_ready and self.imgui.get_io().want_capture_mouse
-
-    def _ui_wants_keys(self) -> bool:
-        return self._imgui_ready and self.imgui.get_io().want_text_input
-
-    def _on_key(self, win, key, scancode, action, mods):
-        self.ui_frames = max(self.ui_frames, 2)
-        if key == glfw.KEY_TAB:
-            # Tab is ours (show / hide the panel), never ImGui's: ImGui moves
-            # keyboard focus with it, and a Tab that reached a panel just
-            # opened (several pressed within a frame) put a text field in
-            # edit mode, which then took every key, Tab and 1..9 included
-            act = self.controls.key("tab") if action == glfw.PRESS else None
-            if act is not None:
-                self.actions.append(act)
-            return
-        backlog = self._imgui_backlog()      # ImGui's events not taken yet, before this one
-        if self._imgui_ready:
-            self.imgui.backends.glfw_key_callback(self._addr, key, scancode, action, mods)
-        name = KEYS.get(key)
-        if action == glfw.RELEASE or name is None:
-            return
-        if backlog or self._deferred_keys:
-            # typed fast into a text field, a Return then P: the field was
-            # still active for ImGui (which had not taken the Return yet), so
-            # P was given to it as text, and dropped when it took the Return
-            event_id = self.imgui.get_current_context().input_events_next_event_id - 1
-            self._deferred_keys.append((event_id, name, mods, action))
-            return
-        if not self._ui_wants_keys():
-            self._shortcut(name, mods, action)
-
-    def _shortcut(self, name: str, mods: int, action: int) -> None:
-        if name in "123456789" and action == glfw.PRESS and self.max_error.on:
-            self.max_error.off("max error off: max depth set by key")
-        act = self.controls.key(name, shift=bool(mods & glfw.MOD_SHIFT), repeat=action == glfw.REPEAT,
-                                ctrl=bool(mods & glfw.MOD_CONTROL))
-        if act is not None:
-            self.actions.append(act)
-
-    def _imgui_backlog(self) -> int:
-        """Input events ImGui has been given and not taken yet: with its
-        trickling queue it takes a key's down and up, and the text typed,
-        over several frames when they come faster than frames."""
-        if not self._imgui_ready:
-            return 0
-        return len(self.imgui.get_current_context().input_events_queue)
-
-    def _on_char(self, win, codepoint):
-        if self._imgui_ready:
-            self.imgui.backends.glfw_char_callback(self._addr, codepoint)
-        self.ui_frames = max(self.ui_frames, 2)
-
-    def _on_mouse_button(self, win, button, action, mods):
-        if self._imgui_ready:
-            self.imgui.backends.glfw_mouse_button_callback(self._addr, button, action, mods)
-        self.ui_frames = max(self.ui_frames, 2)
-        name = BUTTONS.get(button)
-        if name is None:
-            return
-        # the position of the latest motion event (in event order: querying the
-        # pointer now could already see a later position)
-        x, y = self._cursor if self._cursor is not None else glfw.get_cursor_pos(win)
-        if action == glfw.PRESS:
-            if not self._ui_wants_mouse():
-                self.controls.press(name, x, y, shift=bool(mods & glfw.MOD_SHIFT))
-        elif action == glfw.RELEASE:
-            self.controls.release(name, x, y)
-
-    def _on_cursor_pos(self, win, x, y):
-        self._cursor = (x, y)
-        if self._imgui_ready:
-            self.imgui.backends.glfw_cursor_pos_callback(self._addr, x, y)
-            self.ui_frames = max(self.ui_frames, 2)
-        self.controls.move(x, y)
-
-    def _on_scroll(self, win, dx, dy):
-        if self._imgui_ready:
-            self.imgui.backends.glfw_scroll_callback(self._addr, dx, dy)
-        self.ui_frames = max(self.ui_frames, 2)
-        if not self._ui_wants_mouse():
-            self.controls.scroll(dx, dy)
-
-    def _on_window_size(self, win, w, h):
-        if w > 0 and h > 0:
-            self.controls.set_window_size(w, h)
-        self.needs_display = True
-
-    def _on_framebuffer_size(self, win, w, h):
-        self.needs_display = True
-
-    def _on_refresh(self, win):
-        self.needs_display = True
-
-    def _on_focus(self, win, focused):
-        if self._imgui_ready:
-            self.imgui.backends.glfw_window_focus_callback(self._addr, int(focused))
-        self.ui_frames = max(self.ui_frames, 1)
-
-    def _on_drop(self, win, paths):
-        """Files dropped on the window: the first .toml is opened (next frame)."""
-        scenes = [p for p in paths if str(p).lower().endswith(".toml")]
-        if scenes:
-            self.open_request = str(scenes[0])
-        else:
-            self.say(f"not a scene file (.toml): {Path(paths[0]).name}" if paths else "nothing dropped", error=True)
-        self.ui_frames = max(self.ui_frames, 1)
-
-    def _on_cursor_enter(self, win, entered):
-        if self._imgui_ready:
-            self.imgui.backends.glfw_cursor_enter_callback(self._addr, int(entered))
-        self.ui_frames = max(self.ui_frames, 1)
 
     # ------------------------------------------------------------ loop
 
@@ -371,9 +221,9 @@ class Viewer:
         while not glfw.window_should_close(self.window):
             self._wait()
             interrupt.check()         # Ctrl-C in the terminal (deferred: viewer/base/interrupt.py)
-            self._watch_step()
+            self.live.step()
             if self.soak:
-                self._soak_step()
+                soak_step(self)
                 if self.frames == warm:
                     # an adaptive render in flight holds a few GL objects of
                     # its own: counted with none in flight, at both ends; and
@@ -412,7 +262,7 @@ class Viewer:
             return
         fbw, fbh = glfw.get_framebuffer_size(self.window)
         if fbw <= 0 or fbh <= 0:  # minimised: nothing to draw until it comes back
-            glfw.wait_events_timeout(self._idle_wake_s())
+            glfw.wait_events_timeout(self.live.idle_wake_s())
             return
         if self._busy():
             glfw.poll_events()
@@ -427,41 +277,14 @@ class Viewer:
         if self.message and self.message_until > time.perf_counter():
             # idle, but a HUD message is to disappear: wake up then (or to
             # look at the watched files, sooner)
-            glfw.wait_events_timeout(min(self.message_until - time.perf_counter() + 0.01, self._idle_wake_s()))
+            glfw.wait_events_timeout(min(self.message_until - time.perf_counter() + 0.01, self.live.idle_wake_s()))
             if time.perf_counter() >= self.message_until:
                 self.message = ""
                 self.needs_display = True
             return
         # idle: all samples done, nothing changed.  Sleep until an event (the
         # timeout lets Python see a Ctrl-C now and then, and a watched file's save)
-        glfw.wait_events_timeout(self._idle_wake_s())
-
-    def _idle_wake_s(self) -> float:
-        if self.watcher is None:
-            return IDLE_WAKE_S
-        return self.watcher.debounce_s if self.watcher.pending() else WATCH_WAKE_S
-
-    # ------------------------------------------------------------ live reload
-
-    def _watched_files(self) -> list[Path]:
-        """The scene file, its sky picture, and the shaders when they come
-        from a folder someone edits (not an installed wheel's copy)."""
-        files = []
-        if self.scene.path is not None:
-            files.append(Path(self.scene.path))
-        if self.scene.sky.type == "image" and self.scene.sky.image_path is not None:
-            files.append(Path(self.scene.sky.image_path))
-        if shaders_editable():
-            files += shader_files(shader_root())
-        return files
-
-    def _watch_step(self) -> None:
-        """A watched file was saved (and held still): reload as F5 does."""
-        if self.watcher is None:
-            return
-        changed = self.watcher.poll()
-        if changed:
-            self.reload(shaders=any(p.suffix in (".frag", ".vert", ".glsl") for p in changed))
+        glfw.wait_events_timeout(self.live.idle_wake_s())
 
     def _pending(self, fbw: int, fbh: int) -> bool:
         """Work left once the view is still: samples to accumulate, or the
@@ -708,8 +531,8 @@ class Viewer:
 
     def _hud_lines(self) -> list[str]:
         q = [self.max_error.status] if self.max_error.on and self.max_error.status else []
-        if self.reload_error:
-            q.append(self.reload_error)
+        if self.live is not None and self.live.error:
+            q.append(self.live.error)
         if self.controls.view != "image":
             rw, rh = self.debug_res or self.prog.size
             return [self._rate_line(),
@@ -826,71 +649,36 @@ class Viewer:
             self.panel.error = text
 
     def reload(self, shaders: bool = True) -> None:
-        """F5, or a watched file saved: the scene file (overrides applied
-        again) and, with `shaders`, the shaders from disk; on an error the
-        last good ones keep running.  The files as read are the watcher's
-        new starting point (a failed reload waits for the next save)."""
-        try:
-            self._reload_from_disk(shaders)
-        finally:
-            if self.watcher is not None:
-                self.watcher.watch(self._watched_files())
+        """F5 (window/live.py, LiveScene.reload)."""
+        self.live.reload(shaders)
 
-    def _reload_from_disk(self, shaders: bool) -> None:
-        try:
-            fresh = self.loader(self.args)
-        except SceneError as e:
-            self._reload_failed(f"reload failed, keeping the last good scene: {e}")
-            return
-        merged = merge_reloaded(self.file_scene, fresh, self.scene)
-        if shaders:
-            try:
-                renderer = Renderer(self.ctx, merged)  # compiles shaders/ from disk
-            except Exception as e:
-                # the shaders or the new scene's shader (a driver may reject it):
-                # both stay as they were
-                self._reload_failed(f"reload failed, keeping the last good scene and shaders: {e}")
-                return
-            try:
-                self.prog.reload_program()
-            except Exception as e:
-                renderer.release()
-                self._reload_failed(f"reload failed, keeping the last good shaders: {e}")
-                return
-            self.renderer.release()
-            self.renderer = renderer
-            self.prog.set_renderer(renderer)
-        else:
-            # only the scene file changed: the programs stay, and a change of
-            # values compiles nothing (as an edit in the panel)
-            try:
-                self.renderer.set_scene(merged)
-            except Exception as e:      # a scene the driver's shader rejects
-                self.renderer.set_scene(self.scene)
-                self._reload_failed(f"reload failed, keeping the last good scene: {e}")
-                return
-            self.prog.restart()
-        self.scene = merged
+    def open_scene(self, spec: str) -> bool:
+        """Another scene, dropped or typed in the panel (LiveScene.open)."""
+        return self.live.open(spec)
+
+    def adopt_scene(self, scene: Scene, fresh: Scene, start: Scene) -> None:
+        """Show `scene`, already on the renderer: a reload or another scene
+        opened.  `fresh` is the file as read (what the next reload compares
+        against), `start` what R goes back to.  The panel's edits were of
+        the scene before: the undo history is cleared."""
+        self.scene = scene
         self.file_scene = copy.deepcopy(fresh)
-        self.good_scene = copy.deepcopy(merged)
+        self.good_scene = copy.deepcopy(scene)
         self._warn_one_draw()
-        self.controls.rebase(merged, start=fresh)
+        self.controls.rebase(scene, start=start)
         if self.panel is not None:
             self.panel.error = ""
-        glfw.set_window_title(self.window, self._title(merged))
+        glfw.set_window_title(self.window, self._title(scene))
         self.debug_dirty = True
         if self.max_error.on:
-            # the reloaded scene and shaders: measured unless the cache has
-            # them (its key holds both, so an unchanged file is a hit)
+            # measured again unless the cache has it (its key holds the
+            # scene and the shaders, so an unchanged file is a hit)
             self.max_error.close()
             self.max_error.parts = None
             self.max_error.update()
         self.need_preview = True
         self.last_change = time.perf_counter()
-        self.reload_error = ""
-        self.history.clear()                # its edits were of the scene before
-        self.say("reloaded scene and shaders" if shaders else "reloaded the scene")
-        print("reloaded", flush=True)
+        self.history.clear()
 
     def undo(self, redo: bool = False) -> bool:
         """Ctrl+Z (redo: Ctrl+Shift+Z, Ctrl+Y): put back the parts of the
@@ -904,65 +692,6 @@ class Viewer:
         self.controls.changed = True
         self.say(f"{'redone' if redo else 'undone'}: {', '.join(edit.parts)}")
         return True
-
-    def open_scene(self, spec: str) -> bool:
-        """Show another scene: a file (dropped on the window, or typed in the
-        panel) or a built-in scene's name, with the command line's overrides.
-        Its camera is its file's when the file has a [camera] table; without
-        one the view stays where it is.  From now on F5 and the watcher
-        follow that file.  A scene that cannot be opened leaves the shown
-        one as it was, and says why."""
-        args = copy.copy(self.args)
-        args.scene = spec
-        try:
-            fresh = self.loader(args)
-        except SceneError as e:
-            self.error(f"cannot open {spec}: {e}")
-            return False
-        scene = copy.deepcopy(fresh)
-        if not _has_camera_table(fresh):
-            scene.camera = copy.deepcopy(self.scene.camera)
-        try:
-            self.renderer.set_scene(scene)      # compiles when its features differ
-        except Exception as e:
-            self.renderer.set_scene(self.scene)
-            self.error(f"cannot open {spec}: {e}")
-            return False
-        self.args = args
-        self.scene = scene
-        self.file_scene = copy.deepcopy(fresh)
-        self.good_scene = copy.deepcopy(scene)
-        self.reload_error = ""
-        self.history.clear()
-        self.controls.rebase(scene, start=scene)
-        if self.panel is not None:
-            self.panel.error = ""
-            self.panel.scene_opened(scene)
-        if self.watcher is not None:
-            self.watcher.watch(self._watched_files())
-        self._warn_one_draw()
-        self.prog.restart()
-        glfw.set_window_title(self.window, self._title(scene))
-        self.debug_dirty = True
-        if self.max_error.on:
-            self.max_error.close()
-            self.max_error.parts = None
-            self.max_error.update()
-        self.need_preview = True
-        self.last_change = time.perf_counter()
-        self.say(f"opened {scene.name}")
-        print(f"opened {scene.path or spec}", flush=True)
-        return True
-
-    def _reload_failed(self, text: str) -> None:
-        """Say why (stderr, the panel), and keep it in the HUD until a reload
-        succeeds: its first line and the first line naming a file:line (a
-        shader compiler's message has the location on a line of its own)."""
-        self.error(text)
-        lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
-        located = next((ln for ln in lines[1:] if re.search(r"\.(frag|vert|glsl|toml):\d+", ln)), None)
-        self.reload_error = lines[0] + (f" | {located}" if located else "") if lines else text
-        self.needs_display = True
 
     # ------------------------------------------------------------ screenshots
 
@@ -999,40 +728,6 @@ class Viewer:
         self._save_screenshot(save_rgb8, rgb)
 
     # ------------------------------------------------------------ soak (debug)
-
-    def _soak_step(self) -> None:
-        """Programmatic input for ``--soak N``: the camera orbits and zooms,
-        the light moves, the panel opens and closes, the window changes size,
-        and every few frames the view stays still so that samples accumulate."""
-        n = self.frames
-        c = self.controls
-        if n == 0:
-            self._soak_depth = min(9, self.scene.render.max_depth)
-        phase = n % 40
-        if phase < 30:
-            c.orbit_pixels(3.0, 2.0 * math.sin(n * 0.05))
-            if n % 7 == 0:
-                c.key("d" if (n // 70) % 2 == 0 else "a", shift=n % 14 == 0)
-            if n % 11 == 0:
-                c.scroll(0.0, 0.5 if (n // 110) % 2 == 0 else -0.5)
-            if n % 97 == 0:  # two depths, both compiled during the warm-up
-                c.key("3" if (n // 97) % 2 == 0 else str(self._soak_depth))
-        if n % 150 == 0 and self.panel is not None:
-            self.show_panel = not self.show_panel
-            self.panel.open_all = True  # every widget of the panel drawn
-        if n % 60 == 30:
-            self.show_help = not self.show_help
-        if n == 60 and self.panel is not None:  # "max error": measured in steps, then applied
-            self.panel.max_error_on = True
-            self.max_error.update()
-        if n % 170 == 85:  # the debug views too (their textures must not pile up)
-            c.key("v")
-            self._view_changed()
-        if n % 250 == 125:
-            w, h = self.args.size
-            k = (n // 250) % 3
-            glfw.set_window_size(self.window, max(1, w + 16 * k), max(1, h + 8 * k))
-        self.ui_frames = max(self.ui_frames, 1)
 
     # ------------------------------------------------------------ shutdown
 
