@@ -682,14 +682,25 @@ def test_close_button_with_the_panel_open_and_a_hidden_window(xdisplay, tmp_path
     scene_file.write_text(SCENE)
     v = Viewer(xdisplay, tmp_path, str(scene_file), "--size", "200x120", "--no-vsync")
     try:
-        v.key("Tab")
         right = (slice(10, 110), slice(100, 190))
+        bare = settled_shot(v, right)
+        v.key("Tab")
         shown = settled_shot(v, right)
         v.xdo("windowunmap", "--sync", v.wid)
         v.xdo("windowmap", "--sync", v.wid)
         v.xdo("windowfocus", "--sync", v.wid)
         again = settled_shot(v, right)
-        assert np.abs(again[right].astype(int) - shown[right].astype(int)).mean() < 5  # the panel is still there
+
+        def apart(a, b):
+            return np.abs(a[right].astype(int) - b[right].astype(int)).mean()
+
+        # The panel is still there: the picture is much nearer the one with
+        # the panel than that is to the one without.  Not "equal": in a
+        # window this small the HUD's box lies over the panel, and its last
+        # frame time and its "saved <file>" line differ from shot to shot
+        # (under load in CI they made 5.5 of 255 of difference).
+        assert apart(shown, bare) > 20
+        assert apart(again, shown) < apart(shown, bare) / 3
         send_wm_delete(xdisplay, int(v.wid))
         assert v.proc.wait(timeout=30) == 0
         assert not any("Traceback" in e for e in v.stderr), "\n".join(v.stderr)
