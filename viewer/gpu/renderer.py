@@ -640,19 +640,28 @@ class Renderer:
         """(H, W) rays traced per pixel (camera, reflected, refracted, shadow)."""
         return self._debug_pass(3, width, height, offset)[..., 0].round().astype(np.int32)
 
-    def _debug_pass(self, mode: int, width: int, height: int, offset) -> np.ndarray:
-        """One sample of a VIEW_MODE variant of the shader, (H, W, 4) top row first."""
+    def draw_view(self, mode: int, fbo: moderngl.Framebuffer, width: int, height: int,
+                  offset: tuple[float, float] = (0.5, 0.5), rects=None) -> None:
+        """Draw one sample of a VIEW_MODE variant (shaders/debug_view.frag)
+        of a width x height image into `fbo`, without blending: over every
+        pixel, or over `rects` (x, y, w, h, bottom-left origin).  Mode 1
+        writes (t, object index, ...) per pixel: the viewer's pick and
+        outline read it from an RG32F target of their own."""
         main = self.program
         self.program = self.variant(VIEW_MODE=mode)
-        fbo = self._target(width, height)
         try:
             fbo.use()
             self.ctx.disable(moderngl.BLEND)
-            for rect in self.tiles(width, height):   # together they cover every pixel
+            for rect in self.tiles(width, height) if rects is None else rects:  # tiles cover every pixel
                 self.draw_sample(width, height, offset, rect)
-            raw = fbo.read(components=4, dtype="f4")
         finally:
             self.program = main
+
+    def _debug_pass(self, mode: int, width: int, height: int, offset) -> np.ndarray:
+        """One sample of a VIEW_MODE variant of the shader, (H, W, 4) top row first."""
+        fbo = self._target(width, height)
+        self.draw_view(mode, fbo, width, height, offset)
+        raw = fbo.read(components=4, dtype="f4")
         return np.frombuffer(raw, np.float32).reshape(height, width, 4)[::-1]
 
     def release(self) -> None:

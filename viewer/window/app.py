@@ -40,6 +40,8 @@ from .controls import Controls
 from .history import EditHistory
 from .hud import VIEW_NAMES, help_text, window_picture
 from .events import InputEvents
+from .picking import ObjectPicking
+from .selection import Selection
 from .max_error import MaxError
 from .progressive import Progressive
 from .screenshot import save_linear, save_rgb8
@@ -82,7 +84,7 @@ def run(args, load) -> int:
         viewer.close()
 
 
-class Viewer(InputEvents):
+class Viewer(InputEvents, ObjectPicking):
     def __init__(self, args, scene: Scene, loader):
         self.args = args
         self.loader = loader  # args -> scene (scene file plus overrides), for F5
@@ -103,6 +105,8 @@ class Viewer(InputEvents):
         self.open_request: str | None = None    # a scene to open at the next frame (a drop)
         self.history = EditHistory()        # undo / redo of the panel's edits (window/history.py)
         self.debug_tex = self.debug_fbo = None
+        self.selection: Selection | None = None   # the object a click selected (window/picking.py)
+        self._last_click: tuple[float, float] | None = None
         self._errors = init_glfw()
         try:
             self._open(scene)
@@ -132,6 +136,7 @@ class Viewer(InputEvents):
         self.prog = Progressive(self.ctx, self.renderer, DEFAULT_TARGET_MS,
                                 adaptive=bool(getattr(self.args, "adaptive", False)))
         self.controls = Controls(scene, glfw.get_window_size(win))
+        self.selection = Selection(self.ctx)
 
         self.show_panel = False
         self.show_help = False
@@ -338,12 +343,16 @@ class Viewer(InputEvents):
             request, self.open_request = self.open_request, None
             self.open_scene(request)
         ui = self._imgui_ready
+        self._take_pick(fbw, fbh)
+        self._apply_move()
         if ui:
             self._ui_new_frame()
+        self._keep_selection_valid()
         if self.controls.take_changed():
             self._apply_scene()
             self.need_preview = True
             self.debug_dirty = True
+            self.selection.stale = True
             self.last_change = t0
         if self.max_error.job is not None:
             self.max_error.step()
@@ -379,6 +388,8 @@ class Viewer(InputEvents):
                 want_shot += 1
             elif act == "view":
                 self._view_changed()
+            elif act == "deselect":
+                self.select(None)
             elif act in ("undo", "redo"):
                 self.undo(redo=act == "redo")
             elif act == "screenshot_window":
@@ -419,7 +430,9 @@ class Viewer(InputEvents):
         self.history.at_rest(self.scene)
         res = self.panel.draw(self.scene, (ds.x, ds.y))
         self.history.after_panel(self.scene, changed=res.changed or res.camera_changed,
-                                 active=imgui.is_any_item_active())
+                                 active=imgui.is_any_item_active() or self.controls.dragging == "move")
+        if res.selected != self.selection.index:      # a node of the panel's objects clicked
+            self.select(res.selected)
         if res.view_changed:
             self.controls.set_view(self.panel.view)
             self._view_changed()
@@ -477,6 +490,7 @@ class Viewer(InputEvents):
                 # renderer's target, where the view was traced): the overlays
                 # below must go to the window
                 self.ctx.screen.use()
+            self._outline(t0, fbw, fbh)
         if ui:
             imgui = self.imgui
             if draw:
@@ -503,6 +517,15 @@ class Viewer(InputEvents):
             # ImGui takes fast input over several frames: draw until it has
             # all of it (it waited for the next mouse move), then the keys
             self.ui_frames = max(self.ui_frames, 1)
+
+    def _outline(self, t0: float, fbw: int, fbh: int) -> None:
+        """The selection's outline over the picture: its id map made again
+        once the view is still (while things move the outline waits)."""
+        if self.selection.index is None:
+            return
+        if self.selection.stale and (self.soak or t0 - self.last_change >= SETTLE_S) and not self.need_preview:
+            self.selection.update(self.renderer, fbw, fbh)
+        self.selection.draw(self.ctx.screen, (0, 0, fbw, fbh))
 
     def _count_frame(self, t0: float, traced: bool, previewed: bool, trace_ms: float) -> None:
         """The HUD's frame time and rate, and the overhead the next preview
@@ -533,6 +556,7 @@ class Viewer(InputEvents):
         q = [self.max_error.status] if self.max_error.on and self.max_error.status else []
         if self.live is not None and self.live.error:
             q.append(self.live.error)
+        q += self._selection_hud()
         if self.controls.view != "image":
             rw, rh = self.debug_res or self.prog.size
             return [self._rate_line(),
@@ -660,7 +684,9 @@ class Viewer(InputEvents):
         """Show `scene`, already on the renderer: a reload or another scene
         opened.  `fresh` is the file as read (what the next reload compares
         against), `start` what R goes back to.  The panel's edits were of
-        the scene before: the undo history is cleared."""
+        the scene before: the undo history is cleared.  A selection stays
+        through a reload of the same file while its object is still there."""
+        same_file = scene.path is not None and scene.path == self.scene.path
         self.scene = scene
         self.file_scene = copy.deepcopy(fresh)
         self.good_scene = copy.deepcopy(scene)
@@ -679,6 +705,12 @@ class Viewer(InputEvents):
         self.need_preview = True
         self.last_change = time.perf_counter()
         self.history.clear()
+        self.selection.stale = True
+        i = self.selection.index
+        if i is not None and not (same_file and i < len(scene.objects)):
+            self.selection.index = self.controls.selected = self._last_click = None
+            if self.panel is not None:
+                self.panel.select(None)
 
     def undo(self, redo: bool = False) -> bool:
         """Ctrl+Z (redo: Ctrl+Shift+Z, Ctrl+Y): put back the parts of the
@@ -745,13 +777,13 @@ class Viewer(InputEvents):
         except Exception:
             pass
         self._release_debug()
-        for obj in (self.prog, self.renderer):
+        for obj in (self.selection, self.prog, self.renderer):
             if obj is not None:
                 try:
                     obj.release()
                 except Exception:
                     pass
-        self.prog = self.renderer = None
+        self.selection = self.prog = self.renderer = None
         if self.ctx is not None:
             try:
                 self.ctx.release()

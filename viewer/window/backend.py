@@ -31,7 +31,8 @@ KEYS = {getattr(glfw, f"KEY_{c.upper()}"): c for c in "wsadqerphvzy"}
 KEYS.update({getattr(glfw, f"KEY_{d}"): str(d) for d in range(1, 10)})
 KEYS.update({getattr(glfw, f"KEY_KP_{d}"): str(d) for d in range(1, 10)})
 KEYS.update({glfw.KEY_TAB: "tab", glfw.KEY_F1: "f1", glfw.KEY_F5: "f5", glfw.KEY_F12: "f12",
-              glfw.KEY_ESCAPE: "escape"})
+              glfw.KEY_ESCAPE: "escape", glfw.KEY_LEFT: "left", glfw.KEY_RIGHT: "right", glfw.KEY_UP: "up",
+              glfw.KEY_DOWN: "down", glfw.KEY_PAGE_UP: "pageup", glfw.KEY_PAGE_DOWN: "pagedown"})
 BUTTONS = {glfw.MOUSE_BUTTON_LEFT: "left", glfw.MOUSE_BUTTON_RIGHT: "right", glfw.MOUSE_BUTTON_MIDDLE: "middle"}
 
 

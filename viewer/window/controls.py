@@ -15,7 +15,10 @@ import copy
 import math
 from dataclasses import replace
 
+import numpy as np
+
 from .camera import OrbitCamera
+from .pick import CLICK_PX, anchor, floor_axes
 from ..scene.model import Scene
 
 #: A drag across the full height of the window turns the camera by this many radians.
@@ -29,6 +32,14 @@ LIGHT_FAST = 5.0
 
 #: Light keys: key -> (axis, sign): W/S -z/+z, A/D -x/+x, Q/E -y/+y.
 LIGHT_KEYS = {"w": (2, -1.0), "s": (2, 1.0), "a": (0, -1.0), "d": (0, 1.0), "q": (1, -1.0), "e": (1, 1.0)}
+
+#: Keys that move the selected object: key -> (direction, sign); "floor-right"
+#: and "floor-ahead" are the camera's right and forward laid flat on the
+#: floor (window/pick.py, floor_axes), "up" is world +y.  A step is a light
+#: step (LIGHT_STEP_FRACTION of the camera's distance), LIGHT_FAST with shift.
+OBJECT_KEYS = {"left": ("floor-right", -1.0), "right": ("floor-right", 1.0),
+               "up": ("floor-ahead", 1.0), "down": ("floor-ahead", -1.0),
+               "pageup": ("up", 1.0), "pagedown": ("up", -1.0)}
 
 #: With Ctrl held: (key, shift) -> the action (undo and redo of the panel's edits).
 CTRL_ACTIONS = {("z", False): "undo", ("z", True): "redo", ("y", False): "redo"}
@@ -66,7 +77,13 @@ EXTRA_HELP = [
     ("V (shift+V: back)", "cycle the view: image, cost (rays traced per pixel, with a legend), normals, "
                           "depth, objects (the first hit's normal, distance, object); the HUD names it"),
     ("middle-drag", "pan, as right-drag"),
-    ("Ctrl+Z / Ctrl+Shift+Z or Ctrl+Y", "undo / redo the settings panel's edits"),
+    ("click", "select the object under the cursor (outlined; the panel opens its node and material); "
+              "click the same spot again: the object behind it (through a glass: the liquid, then the rod); "
+              "click the sky or Esc: select nothing (Esc with nothing selected quits)"),
+    ("arrows, PageUp / PageDown", "move the selected object: left / right and away / toward along the floor "
+                                  "as the camera faces it, up / down (hold shift: faster)"),
+    ("ctrl+left-drag", "move the selected object in the plane facing the camera, under the cursor"),
+    ("Ctrl+Z / Ctrl+Shift+Z or Ctrl+Y", "undo / redo the settings panel's edits and object moves"),
     ("drop a .toml file", "open that scene (its camera if the file has one, else the view stays)"),
 ]
 
@@ -93,6 +110,14 @@ class Controls:
         self._drag: str | None = None  # "orbit" or "pan" while a button is held
         self._drag_button: str | None = None
         self._last: tuple[float, float] | None = None
+        self._press_at: tuple[float, float] | None = None   # where a left-button orbit started
+        self._dragged = False             # ... and whether it has gone CLICK_PX from there
+        self.selected: int | None = None  # the selected object (its index in scene.objects)
+        # a move of the selected object asked for by keys or a drag, not
+        # applied yet: the window applies it between two snapshots of the
+        # undo history, so that it is an edit of its own (window/app.py)
+        self.pending_move = np.zeros(3)
+        self.pick_request: tuple[float, float] | None = None  # a click to pick at (window pixels)
         self.changed = True
         self.message = ""  # a short note for the HUD (for example "no point light to move")
         self.view = VIEWS[0]  # what the window shows (V cycles)
@@ -146,11 +171,14 @@ class Controls:
 
     # ------------------------------------------------------------ mouse
 
-    def press(self, button: str, x: float, y: float, shift: bool = False) -> None:
+    def press(self, button: str, x: float, y: float, shift: bool = False, ctrl: bool = False) -> None:
         if self._drag is not None:
             return
-        if button == "left":
+        if button == "left" and ctrl and self.selected is not None:
+            self._drag = "move"                  # the selected object follows the cursor
+        elif button == "left":
             self._drag = "pan" if shift else "orbit"
+            self._press_at, self._dragged = (float(x), float(y)), False
         elif button in ("right", "middle"):      # middle-drag pans, as in Blender and most 3D tools
             self._drag = "pan"
         else:
@@ -163,8 +191,10 @@ class Controls:
             return
         if x is not None and y is not None:
             self.move(x, y)
+        if self._drag == "orbit" and not self._dragged and self._press_at is not None:
+            self.pick_request = self._press_at   # a click, not a drag: pick what is under it
         self._drag = self._drag_button = None
-        self._last = None
+        self._last = self._press_at = None
 
     @property
     def dragging(self) -> str | None:
@@ -175,12 +205,21 @@ class Controls:
             return
         if not (math.isfinite(x) and math.isfinite(y)):
             return
+        if self._drag == "orbit" and not self._dragged:
+            # a click until the cursor has gone CLICK_PX: a hand's jitter
+            # during a click neither turns the camera nor restarts the
+            # samples; past it the drag turns by all of its way so far
+            if math.dist(self._press_at, (x, y)) < CLICK_PX:
+                return
+            self._dragged = True
         dx, dy = x - self._last[0], y - self._last[1]
         self._last = (float(x), float(y))
         if dx == 0 and dy == 0:
             return
         if self._drag == "orbit":
             self.orbit_pixels(dx, dy)
+        elif self._drag == "move":
+            self.move_pixels(dx, dy)
         else:
             self.pan_pixels(dx, dy)
 
@@ -197,6 +236,36 @@ class Controls:
         self.camera.pan(-dx * s, dy * s)
         self._sync_scene_camera()
 
+    def move_pixels(self, dx: float, dy: float) -> None:
+        """The selected object's centre follows the cursor in the plane that
+        faces the camera through it (its depth stays)."""
+        if self.selected is None or not 0 <= self.selected < len(self.scene.objects):
+            return
+        eye, f = np.array(self.camera.position), np.array(self.camera.forward)
+        depth = float(np.dot(anchor(self.scene.objects[self.selected], self.camera.target) - eye, f))
+        if not depth > 0:       # behind the eye: a drag has no plane to follow
+            return
+        s = self.camera.world_per_pixel(self.window_size[1]) * depth / self.camera.distance
+        self.pending_move = self.pending_move + s * (dx * np.array(self.camera.right) - dy * np.array(self.camera.up))
+
+    def move_selected(self, direction: str, steps: float) -> bool:
+        """A key's move of the selected object (OBJECT_KEYS), queued on
+        pending_move; False when nothing is selected."""
+        if self.selected is None:
+            self.message = "click an object to select it, then move it with the arrows"
+            return False
+        right, ahead = floor_axes(self.camera.forward)
+        unit = {"floor-right": right, "floor-ahead": ahead, "up": np.array((0.0, 1.0, 0.0))}[direction]
+        self.pending_move = self.pending_move + steps * self.light_step * unit
+        return True
+
+    def take_move(self) -> np.ndarray | None:
+        """The queued move of the selected object, or None; cleared."""
+        if not np.any(self.pending_move):
+            return None
+        move, self.pending_move = self.pending_move, np.zeros(3)
+        return move
+
     def scroll(self, dx: float, dy: float) -> None:
         """Scroll up (dy > 0) moves the eye toward the target."""
         if not math.isfinite(dy) or dy == 0:
@@ -212,10 +281,15 @@ class Controls:
         name of an action the window must carry out (``"screenshot"``,
         ``"screenshot_window"``, ``"toggle_panel"``, ``"reload"``, ``"help"``,
         ``"quit"``, ``"view"`` after V changed :attr:`view`; with ``ctrl``
-        ``"undo"`` or ``"redo"``, CTRL_ACTIONS) or None."""
+        ``"undo"`` or ``"redo"``, CTRL_ACTIONS; ``"deselect"`` for Esc while an
+        object is selected) or None."""
         name = name.lower()
         if ctrl:
             return None if repeat else CTRL_ACTIONS.get((name, shift))
+        if name in OBJECT_KEYS:
+            direction, sign = OBJECT_KEYS[name]
+            self.move_selected(direction, sign * (LIGHT_FAST if shift else 1.0))
+            return None
         if name in LIGHT_KEYS:
             axis, sign = LIGHT_KEYS[name]
             self.move_light(axis, sign * (LIGHT_FAST if shift else 1.0))
@@ -231,6 +305,8 @@ class Controls:
         if name == "v":
             self.cycle_view(-1 if shift else 1)
             return "view"
+        if name == "escape" and self.selected is not None:
+            return "deselect"           # Esc clears a selection first, and quits after
         return ACTIONS.get(name)
 
     def cycle_view(self, step: int = 1) -> str:

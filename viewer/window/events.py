@@ -101,7 +101,7 @@ class InputEvents:
         x, y = self._cursor if self._cursor is not None else glfw.get_cursor_pos(win)
         if action == glfw.PRESS:
             if not self._ui_wants_mouse():
-                self.controls.press(name, x, y, shift=bool(mods & glfw.MOD_SHIFT))
+                self.controls.press(name, x, y, shift=bool(mods & glfw.MOD_SHIFT), ctrl=bool(mods & glfw.MOD_CONTROL))
         elif action == glfw.RELEASE:
             self.controls.release(name, x, y)
 

@@ -76,6 +76,7 @@ class PanelResult:
     remeasure: bool = False  # "measure again" pressed
     adaptive_changed: bool = False  # "adaptive" switched (Panel.adaptive)
     open_path: str | None = None  # "Open" pressed: the scene file or built-in name typed
+    selected: int | None = None  # the selected object after this frame (a node clicked: another)
 
 
 class Panel:
@@ -103,10 +104,19 @@ class Panel:
         self.sky_image = scene.sky.image or ""  # the sky picture's box
         self.sky_note = ""  # why the picture in that box was refused
         self.rect = (0.0, 0.0, 0.0, 0.0)  # the panel's window: x0, y0, x1, y1
+        self.selected: int | None = None  # the selected object (clicked in the view or a node here)
+        self._jump = False  # open and scroll to the selection's node and material when next drawn
+        self.node_rects: dict[int, tuple[float, float, float, float]] = {}  # objects' nodes (tests)
 
     def _open(self) -> None:
         if self.open_all:
             imgui.set_next_item_open(True, imgui.Cond_.always)
+
+    def select(self, index: int | None) -> None:
+        """The selection changed (a click in the view): open its object's
+        node and its material, and scroll to the node, when next drawn."""
+        self.selected = index
+        self._jump = index is not None
 
     def scene_opened(self, scene: Scene) -> None:
         """Another scene replaced the one shown (opened, or dropped on the
@@ -131,7 +141,7 @@ class Panel:
     # ------------------------------------------------------------ drawing
 
     def draw(self, scene: Scene, size: tuple[int, int]) -> PanelResult:
-        res = PanelResult()
+        res = PanelResult(selected=self.selected)
         w, h = size
         pw = min(440.0, max(200.0, w * 0.45))
         # placed at the right edge when first shown and again whenever the
@@ -322,11 +332,17 @@ class Panel:
 
         self._open()
 
+        picked = (scene.objects[self.selected].material
+                  if self.selected is not None and self.selected < len(scene.objects) else None)
+        if self._jump:
+            imgui.set_next_item_open(True, imgui.Cond_.always)
         if imgui.collapsing_header("Materials", imgui.TreeNodeFlags_.default_open):
             for name, m in scene.materials.items():
                 imgui.push_id(f"mat-{name}")
                 self._open()
-                if imgui.tree_node(name):
+                if self._jump and name == picked:
+                    imgui.set_next_item_open(True, imgui.Cond_.always)
+                if imgui.tree_node_ex(name, imgui.TreeNodeFlags_.selected if name == picked else 0):
                     if self._material(m, name, scene):
                         res.changed = True
                     imgui.tree_pop()
@@ -334,8 +350,10 @@ class Panel:
 
         self._open()
 
+        if self._jump:
+            imgui.set_next_item_open(True, imgui.Cond_.always)
         if imgui.collapsing_header("Objects"):
-            if self._objects(scene):
+            if self._objects(scene, res):
                 res.changed = True
 
 
@@ -439,12 +457,25 @@ class Panel:
 
     # ------------------------------------------------------------ objects
 
-    def _objects(self, scene: Scene) -> bool:
+    def _objects(self, scene: Scene, res: PanelResult) -> bool:
         changed, remove = False, None
+        self.node_rects = {}
         for i, o in enumerate(scene.objects):
             imgui.push_id(f"obj{i}")
             self._open()
-            if imgui.tree_node(f"{i}: {o.name or o.type}" + (f" ({o.type})" if o.name else "")):
+            mine = i == self.selected
+            if mine and self._jump:
+                imgui.set_next_item_open(True, imgui.Cond_.always)
+            is_open = imgui.tree_node_ex(f"{i}: {o.name or o.type}" + (f" ({o.type})" if o.name else ""),
+                                         imgui.TreeNodeFlags_.selected if mine else 0)
+            lo, hi = imgui.get_item_rect_min(), imgui.get_item_rect_max()
+            self.node_rects[i] = (lo.x, lo.y, hi.x, hi.y)
+            if imgui.is_item_clicked() and not imgui.is_item_toggled_open():
+                self.selected = res.selected = i      # the node's label clicked: select it
+            if mine and self._jump:
+                imgui.set_scroll_here_y(0.2)
+                self._jump = False
+            if is_open:
                 if self._object(o, scene):
                     changed = True
                 if imgui.small_button("own material"):

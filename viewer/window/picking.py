@@ -1,0 +1,87 @@
+"""The viewer's part that selects and moves objects: a click picks the
+object under the cursor (window/selection.py asks the GPU for the first
+hit; window/pick.py decides which object a repeated click means and moves
+it), the panel shows it, the outline follows it, and a move of it is an
+undoable edit (window/history.py).
+
+ObjectPicking is a part of Viewer (window/app.py), kept here because it is
+one job: it reads and sets the viewer's `controls`, `selection`, `scene`,
+`renderer`, `panel`, `show_panel`, `history`, `needs_display` and
+`_last_click`.
+"""
+
+from __future__ import annotations
+
+import math
+
+from . import backend  # noqa: F401  (first: it imports imgui-bundle before glfw; backend.py says why)
+
+import glfw  # noqa: E402
+
+from .pick import CLICK_PX, next_pick, objects_along, translate
+
+
+def describe(scene, index: int) -> str:
+    o = scene.objects[index]
+    return f"{index}: {o.name} ({o.type})" if o.name else f"{index}: {o.type}"
+
+
+class ObjectPicking:
+    def _take_pick(self, fbw: int, fbh: int) -> None:
+        """A click since the last frame: select what is under it."""
+        req, self.controls.pick_request = self.controls.pick_request, None
+        if req is None:
+            return
+        ww, wh = glfw.get_window_size(self.window)
+        # window coordinates to framebuffer pixels (they differ on a HiDPI screen)
+        x, y = req[0] * fbw / max(ww, 1), req[1] * fbh / max(wh, 1)
+        first = self.selection.first_hit(self.renderer, fbw, fbh, x, y)
+        again = self._last_click is not None and math.dist(self._last_click, req) <= CLICK_PX
+        along = objects_along(self.scene, fbw, fbh, x, y) if again and first >= 0 else []
+        self._last_click = req
+        self.select(next_pick(first, along, self.selection.index, again))
+
+    def select(self, index: int | None) -> None:
+        """Select object `index` of the scene (None: nothing): outlined, and
+        the panel opens its node and material (now, or when it is shown)."""
+        if index is not None and not 0 <= index < len(self.scene.objects):
+            index = None
+        self.selection.index = self.controls.selected = index
+        if self.panel is not None:
+            self.panel.select(index)
+        self.needs_display = True
+        self.ui_frames = max(self.ui_frames, 2)
+        if index is None:
+            self._last_click = None
+            self.say("nothing selected")
+        else:
+            self.say(f"selected {describe(self.scene, index)}: arrows, PageUp/PageDown or ctrl+drag move it")
+
+    def _apply_move(self) -> None:
+        """The move of the selected object that keys or a drag asked for,
+        as an edit of its own in the undo history: a drag is one edit from
+        press to release, a key press one each."""
+        move = self.controls.take_move()
+        dragging = self.controls.dragging == "move"
+        i = self.selection.index
+        if move is not None and i is not None and i < len(self.scene.objects):
+            self.history.at_rest(self.scene)
+            if translate(self.scene.objects[i], move):
+                self.history.after_panel(self.scene, changed=True, active=dragging)
+                self.controls.changed = True
+        if not self.show_panel:      # else the panel's turn ends the edit (app.py, _ui_new_frame)
+            self.history.after_panel(self.scene, changed=False, active=dragging)
+
+    def _keep_selection_valid(self) -> None:
+        """An object removed (the panel, an undo) can take the selected
+        index with it: then nothing is selected."""
+        i = self.selection.index
+        if i is not None and i >= len(self.scene.objects):
+            self.selection.index = self.controls.selected = self._last_click = None
+            if self.panel is not None:
+                self.panel.select(None)
+            self.needs_display = True
+
+    def _selection_hud(self) -> list[str]:
+        i = self.selection.index
+        return [] if i is None or i >= len(self.scene.objects) else [f"selected {describe(self.scene, i)}"]
