@@ -430,10 +430,9 @@ def test_the_hud_says_idle_once_every_sample_is_in():
 
     v = object.__new__(Viewer)           # _hud_lines reads only these
     v.panel, v.frame_ms, v.fps, v.work_ms = None, 303.7, 3.0, 310.2
-    v.selection = SimpleNamespace(index=None)
     v.max_error, v.live = SimpleNamespace(on=False, status=""), SimpleNamespace(error="")
     v.scene = SimpleNamespace(render=SimpleNamespace(max_depth=8))
-    v.controls = SimpleNamespace(view="image")
+    v.controls = SimpleNamespace(view="image", selected=None)
     v.prog = SimpleNamespace(active_resolution=(320, 180), size=(320, 180), samples=16, passes_done=7,
                              adaptive=False, done=False)
     # rate and time of the same window, labelled (not the last frame's

@@ -431,8 +431,8 @@ class Viewer(InputEvents, ObjectPicking):
         res = self.panel.draw(self.scene, (ds.x, ds.y))
         self.history.after_panel(self.scene, changed=res.changed or res.camera_changed,
                                  active=imgui.is_any_item_active() or self.controls.dragging == "move")
-        if res.selected != self.selection.index:      # a node of the panel's objects clicked
-            self.select(res.selected)
+        if self.panel.selected != self.controls.selected:   # a node of the panel's objects clicked
+            self.select(self.panel.selected)
         if res.view_changed:
             self.controls.set_view(self.panel.view)
             self._view_changed()
@@ -521,11 +521,11 @@ class Viewer(InputEvents, ObjectPicking):
     def _outline(self, t0: float, fbw: int, fbh: int) -> None:
         """The selection's outline over the picture: its id map made again
         once the view is still (while things move the outline waits)."""
-        if self.selection.index is None:
+        if self.controls.selected is None:
             return
         if self.selection.stale and (self.soak or t0 - self.last_change >= SETTLE_S) and not self.need_preview:
             self.selection.update(self.renderer, fbw, fbh)
-        self.selection.draw(self.ctx.screen, (0, 0, fbw, fbh))
+        self.selection.draw(self.ctx.screen, (0, 0, fbw, fbh), self.controls.selected)
 
     def _count_frame(self, t0: float, traced: bool, previewed: bool, trace_ms: float) -> None:
         """The HUD's frame time and rate, and the overhead the next preview
@@ -706,11 +706,9 @@ class Viewer(InputEvents, ObjectPicking):
         self.last_change = time.perf_counter()
         self.history.clear()
         self.selection.stale = True
-        i = self.selection.index
+        i = self.controls.selected
         if i is not None and not (same_file and i < len(scene.objects)):
-            self.selection.index = self.controls.selected = self._last_click = None
-            if self.panel is not None:
-                self.panel.select(None)
+            self._set_selected(None)
 
     def undo(self, redo: bool = False) -> bool:
         """Ctrl+Z (redo: Ctrl+Shift+Z, Ctrl+Y): put back the parts of the

@@ -76,7 +76,6 @@ class PanelResult:
     remeasure: bool = False  # "measure again" pressed
     adaptive_changed: bool = False  # "adaptive" switched (Panel.adaptive)
     open_path: str | None = None  # "Open" pressed: the scene file or built-in name typed
-    selected: int | None = None  # the selected object after this frame (a node clicked: another)
 
 
 class Panel:
@@ -106,7 +105,6 @@ class Panel:
         self.rect = (0.0, 0.0, 0.0, 0.0)  # the panel's window: x0, y0, x1, y1
         self.selected: int | None = None  # the selected object (clicked in the view or a node here)
         self._jump = False  # open and scroll to the selection's node and material when next drawn
-        self.node_rects: dict[int, tuple[float, float, float, float]] = {}  # objects' nodes (tests)
 
     def _open(self) -> None:
         if self.open_all:
@@ -141,7 +139,7 @@ class Panel:
     # ------------------------------------------------------------ drawing
 
     def draw(self, scene: Scene, size: tuple[int, int]) -> PanelResult:
-        res = PanelResult(selected=self.selected)
+        res = PanelResult()
         w, h = size
         pw = min(440.0, max(200.0, w * 0.45))
         # placed at the right edge when first shown and again whenever the
@@ -353,7 +351,7 @@ class Panel:
         if self._jump:
             imgui.set_next_item_open(True, imgui.Cond_.always)
         if imgui.collapsing_header("Objects"):
-            if self._objects(scene, res):
+            if self._objects(scene):
                 res.changed = True
 
 
@@ -457,9 +455,8 @@ class Panel:
 
     # ------------------------------------------------------------ objects
 
-    def _objects(self, scene: Scene, res: PanelResult) -> bool:
+    def _objects(self, scene: Scene) -> bool:
         changed, remove = False, None
-        self.node_rects = {}
         for i, o in enumerate(scene.objects):
             imgui.push_id(f"obj{i}")
             self._open()
@@ -468,10 +465,8 @@ class Panel:
                 imgui.set_next_item_open(True, imgui.Cond_.always)
             is_open = imgui.tree_node_ex(f"{i}: {o.name or o.type}" + (f" ({o.type})" if o.name else ""),
                                          imgui.TreeNodeFlags_.selected if mine else 0)
-            lo, hi = imgui.get_item_rect_min(), imgui.get_item_rect_max()
-            self.node_rects[i] = (lo.x, lo.y, hi.x, hi.y)
             if imgui.is_item_clicked() and not imgui.is_item_toggled_open():
-                self.selected = res.selected = i      # the node's label clicked: select it
+                self.selected = i      # the node's label clicked: the app selects it
             if mine and self._jump:
                 imgui.set_scroll_here_y(0.2)
                 self._jump = False

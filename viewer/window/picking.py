@@ -5,7 +5,8 @@ it), the panel shows it, the outline follows it, and a move of it is an
 undoable edit (window/history.py).
 
 ObjectPicking is a part of Viewer (window/app.py), kept here because it is
-one job: it reads and sets the viewer's `controls`, `selection`, `scene`,
+one job: it reads and sets the viewer's `controls` (whose `selected` is
+the selection: the panel and the outline follow it), `selection`, `scene`,
 `renderer`, `panel`, `show_panel`, `history`, `needs_display` and
 `_last_click`.
 """
@@ -39,20 +40,16 @@ class ObjectPicking:
         again = self._last_click is not None and math.dist(self._last_click, req) <= CLICK_PX
         along = objects_along(self.scene, fbw, fbh, x, y) if again and first >= 0 else []
         self._last_click = req
-        self.select(next_pick(first, along, self.selection.index, again))
+        self.select(next_pick(first, along, self.controls.selected, again))
 
     def select(self, index: int | None) -> None:
         """Select object `index` of the scene (None: nothing): outlined, and
         the panel opens its node and material (now, or when it is shown)."""
         if index is not None and not 0 <= index < len(self.scene.objects):
             index = None
-        self.selection.index = self.controls.selected = index
-        if self.panel is not None:
-            self.panel.select(index)
-        self.needs_display = True
+        self._set_selected(index)
         self.ui_frames = max(self.ui_frames, 2)
         if index is None:
-            self._last_click = None
             self.say("nothing selected")
         else:
             self.say(f"selected {describe(self.scene, index)}: arrows, PageUp/PageDown or ctrl+drag move it")
@@ -63,7 +60,7 @@ class ObjectPicking:
         press to release, a key press one each."""
         move = self.controls.take_move()
         dragging = self.controls.dragging == "move"
-        i = self.selection.index
+        i = self.controls.selected
         if move is not None and i is not None and i < len(self.scene.objects):
             self.history.at_rest(self.scene)
             if translate(self.scene.objects[i], move):
@@ -75,13 +72,19 @@ class ObjectPicking:
     def _keep_selection_valid(self) -> None:
         """An object removed (the panel, an undo) can take the selected
         index with it: then nothing is selected."""
-        i = self.selection.index
+        i = self.controls.selected
         if i is not None and i >= len(self.scene.objects):
-            self.selection.index = self.controls.selected = self._last_click = None
-            if self.panel is not None:
-                self.panel.select(None)
-            self.needs_display = True
+            self._set_selected(None)
+
+    def _set_selected(self, index: int | None) -> None:
+        """The one place the selection changes: the panel told, the outline redrawn."""
+        self.controls.selected = index
+        if index is None:
+            self._last_click = None
+        if self.panel is not None:
+            self.panel.select(index)
+        self.needs_display = True
 
     def _selection_hud(self) -> list[str]:
-        i = self.selection.index
+        i = self.controls.selected
         return [] if i is None or i >= len(self.scene.objects) else [f"selected {describe(self.scene, i)}"]

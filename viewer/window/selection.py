@@ -26,7 +26,6 @@ OUTLINE_RADIUS = 1
 class Selection:
     def __init__(self, ctx: moderngl.Context):
         self.ctx = ctx
-        self.index: int | None = None    # the selected object (its place in scene.objects)
         self.stale = True                # the id map is not of the picture shown
         self._tex = self._fbo = None
         self._prog = self._vao = None
@@ -62,11 +61,10 @@ class Selection:
 
     # ------------------------------------------------------------ the outline
 
-    def draw(self, fbo: moderngl.Framebuffer, viewport: tuple[int, int, int, int]) -> bool:
-        """Outline the selection over what `fbo` shows (True), unless nothing
-        is selected or the id map is stale (False: the caller updates it
-        once the view is still)."""
-        if self.index is None or self.stale or self._tex is None:
+    def draw(self, fbo: moderngl.Framebuffer, viewport: tuple[int, int, int, int], index: int) -> bool:
+        """Outline object `index` over what `fbo` shows (True), unless the id
+        map is stale (False: the caller updates it once the view is still)."""
+        if self.stale or self._tex is None:
             return False
         if self._prog is None:
             self._prog = build_program(self.ctx, fragment="outline.frag", vertex="fullscreen.vert")
@@ -79,7 +77,7 @@ class Selection:
         self._tex.use(location=0)
         prog = self._prog
         for name, value in (("idTex", 0), ("outSize", (float(viewport[2]), float(viewport[3]))),
-                            ("selected", float(self.index)), ("outlineColor", OUTLINE_COLOR),
+                            ("selected", float(index)), ("outlineColor", OUTLINE_COLOR),
                             ("radius", OUTLINE_RADIUS)):
             if name in prog:
                 prog[name].value = value
