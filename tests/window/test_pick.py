@@ -127,3 +127,20 @@ def test_keys_and_a_ctrl_drag_move_the_selected_object_only():
     assert c.key("escape") == "deselect"
     c.selected = None
     assert c.key("escape") == "quit"
+
+
+def test_a_click_on_the_open_panel_is_not_a_pick():
+    """Moved onto the panel and clicked within one frame, ImGui had not yet
+    claimed the mouse: the click went to the view behind the panel too
+    (the fast-typing test in test_viewer_e2e.py printed "nothing selected")."""
+    from types import SimpleNamespace
+
+    pytest.importorskip("glfw")
+    from viewer.window.picking import ObjectPicking
+
+    v = SimpleNamespace(show_panel=True, panel=SimpleNamespace(rect=(256.0, 8.0, 472.0, 262.0)))
+    assert ObjectPicking._on_panel(v, (300, 62))
+    assert not ObjectPicking._on_panel(v, (115, 150))      # the ball, left of the panel
+    assert not ObjectPicking._on_panel(v, (472, 62))       # the panel's right edge is outside
+    v.show_panel = False                                   # hidden: its last rect means nothing
+    assert not ObjectPicking._on_panel(v, (300, 62))
