@@ -27,7 +27,8 @@ def ui():
 def test_every_section_draws_without_changing_the_scene(ui, name):
     import copy
 
-    from viewer.window.panel import Panel, draw_help, draw_hud
+    from viewer.window.overlays import draw_help, draw_hud
+    from viewer.window.panel import Panel
 
     scene = load_scene(name)
     before = copy.deepcopy(scene)
@@ -182,11 +183,10 @@ def test_the_hud_shows_no_glyph_the_font_lacks(ui, monkeypatch):
     """The HUD line of "max error" ("measuring…") showed a "?" for the
     ellipsis, which the default font does not have (the panel and the help
     already wrote it as "...")."""
-    from viewer.window import panel as ui_module
+    from viewer.window import overlays as ui_module
 
     shown = []
-    monkeypatch.setattr(ui_module.imgui, "text", lambda s: shown.append(s))
-    monkeypatch.setattr(ui_module.imgui, "text_colored", lambda col, s: shown.append(s))
+    monkeypatch.setattr(ui_module.imgui, "text_wrapped", lambda s: shown.append(s))
     imgui.new_frame()
     ui_module.draw_hud(["12.0 ms  80 fps", "max error 0.02: measuring\u2026 37%"], "max error: measuring\u2026")
     imgui.render()
@@ -197,7 +197,7 @@ def test_the_hud_shows_no_glyph_the_font_lacks(ui, monkeypatch):
 def test_a_long_hud_message_is_wrapped_inside_the_window(ui):
     # a failed F5's message was one line cut at the window's edge: at 320 px
     # only "reload failed, keeping the last good scene:" could be read
-    from viewer.window import panel as ui_module
+    from viewer.window import overlays as ui_module
 
     message = ("reload failed, keeping the last good scene: /tmp/scene.toml: objects[0].radius: "
                "expected a number > 0, got -1")
@@ -219,7 +219,7 @@ def test_a_long_hud_message_is_wrapped_inside_the_window(ui):
 def test_the_help_stays_in_a_window_resized_while_it_is_open(ui):
     """The help was centred only when it opened: a window made smaller
     while it was open left it partly outside."""
-    from viewer.window import panel as ui_module
+    from viewer.window import overlays as ui_module
 
     for size in ((1280, 720), (640, 400), (400, 300)):
         ui.display_size = imgui.ImVec2(*size)
@@ -234,7 +234,7 @@ def test_the_help_stays_in_a_window_resized_while_it_is_open(ui):
 
 def test_the_add_buttons_stay_inside_a_narrow_panel(ui, monkeypatch):
     # side by side, "add plane" was cut off at the panel's edge in a 640 px window
-    from viewer.window import panel as ui_module
+    from viewer.window import overlays as ui_module
     from viewer.window.panel import Panel
 
     real = imgui.small_button

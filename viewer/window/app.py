@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import copy
 import ctypes
+import math
 import os
 import sys
 import time
@@ -38,7 +39,7 @@ from ..gpu.renderer import Renderer
 from ..scene.model import Scene
 from .controls import Controls
 from .history import EditHistory
-from .hud import VIEW_NAMES, help_text, window_picture
+from .hud import DEPTH, HINT, NOTE, RESOLUTION, STATUS, VIEW_NAMES, help_text, window_picture
 from .events import InputEvents
 from .picking import ObjectPicking
 from .selection import Selection
@@ -56,8 +57,12 @@ DEFAULT_TARGET_MS = 33.0
 ACCUMULATE_DISPLAY_S = 0.25
 #: The HUD's fps and frame time are means over this long (s).
 FPS_WINDOW_S = 0.5
-#: How long a HUD message stays.
-MESSAGE_S = 4.0
+#: How long a HUD message that says what was done stays (s).  One that
+#: says something went wrong stays until read: until a key or a button is
+#: pressed at least READ_S after it appeared (the key that caused it, held,
+#: does not take it away).
+MESSAGE_S = 6.0
+READ_S = 1.0
 
 
 def run(args, load) -> int:
@@ -151,6 +156,8 @@ class Viewer(InputEvents, ObjectPicking):
         self.last_change = time.perf_counter()
         self.message = ""
         self.message_until = 0.0
+        self.message_kind = "info"   # or "error": kept until read (say)
+        self.message_t0 = 0.0
         self._one_draw_warned = None
         self._warn_one_draw()
         self.frame_ms = 0.0
@@ -312,12 +319,24 @@ class Viewer(InputEvents, ObjectPicking):
         """The window's size in pixels (0 x 0 while minimised)."""
         return glfw.get_framebuffer_size(self.window)
 
-    def say(self, text: str, error: bool = False) -> None:
-        """Show `text` in the HUD for MESSAGE_S (and on stderr when `error`)."""
-        self.message = text
-        self.message_until = time.perf_counter() + MESSAGE_S
+    def say(self, text: str, error: bool = False, keep: bool = False) -> None:
+        """Show `text` in the HUD: for MESSAGE_S, or, when `error` or `keep`,
+        in the error colour until read (message_read); an `error` goes to
+        stderr too."""
+        now = time.perf_counter()
+        self.message, self.message_t0 = text, now
+        self.message_kind = "error" if (error or keep) else "info"
+        self.message_until = math.inf if (error or keep) else now + MESSAGE_S
+        self.needs_display = True
         if error:
             print(f"glassray: {text}", file=sys.stderr, flush=True)
+
+    def message_read(self) -> None:
+        """A key or a mouse button pressed: a kept message has been read,
+        once it has been up for READ_S."""
+        if self.message and self.message_kind == "error" and time.perf_counter() - self.message_t0 >= READ_S:
+            self.message, self.message_until = "", 0.0
+            self.needs_display = True
 
     def _frame(self) -> None:
         """One turn of the loop: take the input, update the scene, trace
@@ -428,6 +447,8 @@ class Viewer(InputEvents, ObjectPicking):
         self.panel.view = self.controls.view
         self.panel.quality_status = self.max_error.status
         self.history.at_rest(self.scene)
+        # a window with no room for the HUD beside the panel: the panel shows it
+        self.panel.hud = self._overlay_hud() if self.panel.hud_inside((ds.x, ds.y)) else None
         res = self.panel.draw(self.scene, (ds.x, ds.y))
         self.history.after_panel(self.scene, changed=res.changed or res.camera_changed,
                                  active=imgui.is_any_item_active() or self.controls.dragging == "move")
@@ -553,16 +574,22 @@ class Viewer(InputEvents, ObjectPicking):
         return f"{self.fps:.0f} fps, {work:.1f} ms a frame"
 
     def _hud_lines(self) -> list[str]:
+        """The HUD's lines as text (the window title's, without ImGui)."""
+        return [text for text, _ in self._hud()]
+
+    def _hud(self) -> list[tuple[str, int]]:
+        """The HUD's lines, each with how readily it is left out of a small
+        window (hud.py's ranks)."""
         q = [self.max_error.status] if self.max_error.on and self.max_error.status else []
         if self.live is not None and self.live.error:
             q.append(self.live.error)
         q += self._selection_hud()
         if self.controls.view != "image":
             rw, rh = self.debug_res or self.prog.size
-            return [self._rate_line(),
-                    f"view: {VIEW_NAMES.get(self.controls.view, self.controls.view)}  (V: next)",
-                    f"{rw}x{rh}" + (" (preview)" if (rw, rh) != self.prog.size else ""),
-                    f"max depth {self.scene.render.max_depth}", *q]
+            return [(self._rate_line(), STATUS),
+                    (f"view: {VIEW_NAMES.get(self.controls.view, self.controls.view)}  (V: next)", STATUS),
+                    (f"{rw}x{rh}" + (" (preview)" if (rw, rh) != self.prog.size else ""), RESOLUTION),
+                    (f"max depth {self.scene.render.max_depth}", DEPTH), *((t, NOTE) for t in q)]
         rw, rh = self.prog.active_resolution
         preview = (rw, rh) != self.prog.size
         total = self.prog.samples
@@ -576,22 +603,31 @@ class Viewer(InputEvents, ObjectPicking):
         # frames would stay on screen, stale (it read 22 fps long after)
         timing = (f"idle (last frame {self.frame_ms:.1f} ms)" if self.prog.done and not preview
                   else self._rate_line())
-        return [timing,
-                f"{rw}x{rh}" + (" (preview)" if preview else ""),
-                samples,
-                f"max depth {self.scene.render.max_depth}", *q]
+        return [(timing, STATUS),
+                (f"{rw}x{rh}" + (" (preview)" if preview else ""), RESOLUTION),
+                (samples, STATUS),
+                (f"max depth {self.scene.render.max_depth}", DEPTH), *((t, NOTE) for t in q)]
+
+    def _overlay_hud(self) -> tuple[list[tuple[str, int]], str, str]:
+        """What the HUD says this frame: its lines, the message, its kind."""
+        msg = self.message if time.perf_counter() < self.message_until else ""
+        lines = self._hud()
+        if not self.show_panel:
+            lines.append(("Tab: settings  H: help", HINT))
+        return lines, msg, self.message_kind
 
     def _draw_overlays(self) -> None:
-        from .panel import draw_help, draw_hud  # imgui_bundle, present once _setup_imgui ran
+        from .overlays import draw_help, draw_hud  # imgui_bundle, present once _setup_imgui ran
 
-        msg = self.message if time.perf_counter() < self.message_until else ""
-        lines = self._hud_lines()
-        if not self.show_panel:
-            lines.append("Tab: settings  H: help")
-        draw_hud(lines, msg)
+        ds = self.imgui.get_io().display_size
+        lines, msg, kind = self._overlay_hud()
+        inside = self.show_panel and self.panel.hud_inside((ds.x, ds.y))
+        right = self.panel.left_edge((ds.x, ds.y)) if self.show_panel else ds.x
+        if not inside:            # else the panel drew it (_ui_new_frame)
+            draw_hud(lines, msg, kind, right=right)
         # an auto-sized ImGui window takes its new size one frame late: draw
         # again when the overlays' layout changes
-        layout = (len(lines), msg, self.show_help, self.show_panel)
+        layout = (len(lines), msg, self.show_help, self.show_panel, inside, right, ds.y)
         if layout != self._overlay_layout:
             self._overlay_layout = layout
             self.ui_frames = max(self.ui_frames, 2)
@@ -667,7 +703,9 @@ class Viewer(InputEvents, ObjectPicking):
             self.panel.adaptive = self.prog.adaptive
 
     def error(self, text: str) -> None:
-        self.say(text.splitlines()[0] if text else text, error=False)
+        """Something the user asked for failed: its first line kept in the
+        HUD until read, the whole text on stderr and in the panel."""
+        self.say(text.splitlines()[0] if text else text, keep=True)
         print(f"glassray: {text}", file=sys.stderr, flush=True)
         if self.panel is not None:
             self.panel.error = text

@@ -43,6 +43,8 @@ class InputEvents:
 
     def _on_key(self, win, key, scancode, action, mods):
         self.ui_frames = max(self.ui_frames, 2)
+        if action == glfw.PRESS:
+            self.message_read()
         if key == glfw.KEY_TAB:
             # Tab is ours (show / hide the panel), never ImGui's: ImGui moves
             # keyboard focus with it, and a Tab that reached a panel just
@@ -93,6 +95,8 @@ class InputEvents:
         if self._imgui_ready:
             self.imgui.backends.glfw_mouse_button_callback(self._addr, button, action, mods)
         self.ui_frames = max(self.ui_frames, 2)
+        if action == glfw.PRESS:
+            self.message_read()
         name = BUTTONS.get(button)
         if name is None:
             return

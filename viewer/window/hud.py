@@ -37,3 +37,33 @@ def window_picture(view: str, raw: np.ndarray, width: int, height: int) -> np.nd
         pic = (np.concatenate([pic[:height - legend.shape[0]], legend]) if height >= 2 * legend.shape[0]
                else pic[:height])
     return np.round(255 * pic).astype(np.uint8)
+
+
+# ------------------------------------------------------------ the HUD's lines
+
+#: How readily a HUD line is left out of a window too small to show them all
+#: whole (the higher, the sooner): the key hint first, then the depth, the
+#: resolution, what the view is doing (frame time, samples), and last the
+#: notes (a failed reload, the selection, "max error"); the message, there
+#: to be read, is never left out.
+ALWAYS, NOTE, STATUS, RESOLUTION, DEPTH, HINT = range(6)
+
+
+def lines_that_fit(ranks: list[int], heights: list[float], room: float, gap: float) -> list[bool]:
+    """Which of the HUD's lines to show, in their order: all of them when
+    their heights (each line as wrapped) and a `gap` between two fit in
+    `room`; else the lines of the highest rank are left out first (among
+    equals the last first) until the rest fit.  ALWAYS lines are never
+    left out: in a window too small even for those, they are shown and the
+    window cuts them."""
+    shown = [True] * len(ranks)
+
+    def height() -> float:
+        hs = [h for h, s in zip(heights, shown) if s]
+        return sum(hs) + gap * max(0, len(hs) - 1)
+
+    for i in sorted(range(len(ranks)), key=lambda i: (-ranks[i], -i)):
+        if height() <= room or ranks[i] == ALWAYS:
+            break
+        shown[i] = False
+    return shown

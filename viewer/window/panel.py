@@ -1,5 +1,5 @@
-"""The viewer's Dear ImGui widgets (imgui-bundle): the settings panel, the
-HUD and the help overlay.  Widgets only: the window module owns GLFW and the
+"""The viewer's settings panel, in Dear ImGui (imgui-bundle); the HUD and
+the help overlay are window/overlays.py's.  Widgets only: the window module owns GLFW and the
 ImGui backends and calls these between ``imgui.new_frame()`` and
 ``imgui.render()``.
 
@@ -21,7 +21,8 @@ from pathlib import Path
 import numpy as np
 from imgui_bundle import imgui
 
-from .controls import HELP_ALL as HELP, VIEWS, first_point_light
+from .controls import VIEWS, first_point_light
+from .overlays import HUD_MIN_WIDTH, hud_body, plain
 from ..scene.model import (MAX_LIGHTS, MAX_OBJECTS, MAX_TRANSPARENT_OBJECTS, Camera, Checker, Light, Material, Scene,
                            SceneError, SceneObject)
 from ..scene.save import save_scene
@@ -105,6 +106,9 @@ class Panel:
         self.rect = (0.0, 0.0, 0.0, 0.0)  # the panel's window: x0, y0, x1, y1
         self.selected: int | None = None  # the selected object (clicked in the view or a node here)
         self._jump = False  # open and scroll to the selection's node and material when next drawn
+        # (lines, message, kind): the HUD, shown at the panel's top when the
+        # window leaves it no room beside the panel (the app sets it; None: not here)
+        self.hud: tuple | None = None
 
     def _open(self) -> None:
         if self.open_all:
@@ -138,10 +142,26 @@ class Panel:
 
     # ------------------------------------------------------------ drawing
 
+    @staticmethod
+    def _width(w: float) -> float:
+        return min(440.0, max(200.0, w * 0.45))
+
+    def left_edge(self, size: tuple[float, float]) -> float:
+        """Where the panel's left edge is in a window of `size`: where it was
+        drawn, or, not yet drawn at this size, where it will be placed."""
+        if self._drawn_size == (float(size[0]), float(size[1])):
+            return self.rect[0]
+        return size[0] - 8.0 - self._width(size[0])
+
+    def hud_inside(self, size: tuple[float, float]) -> bool:
+        """Whether the window leaves too little room beside the panel for
+        the HUD (window/overlays.py): then the panel shows it at its top."""
+        return self.left_edge(size) < HUD_MIN_WIDTH
+
     def draw(self, scene: Scene, size: tuple[int, int]) -> PanelResult:
         res = PanelResult()
         w, h = size
-        pw = min(440.0, max(200.0, w * 0.45))
+        pw = self._width(w)
         # placed at the right edge when first shown and again whenever the
         # window's size changed since the panel was last drawn: left where it
         # was, a panel of a larger window ended up outside a smaller one (and
@@ -168,6 +188,9 @@ class Panel:
         return res
 
     def _draw_contents(self, scene: Scene, res: PanelResult) -> None:
+        if self.hud is not None:
+            hud_body(*self.hud)
+            imgui.separator()
         if self.error:
             imgui.push_text_wrap_pos(0.0)
             imgui.text_colored(imgui.ImVec4(1.0, 0.35, 0.3, 1.0), self.error)
@@ -218,7 +241,7 @@ class Panel:
                 self.max_error, res.quality_changed = v, True
             if self.max_error_on:
                 if self.quality_status:
-                    imgui.text_wrapped(_plain(self.quality_status))
+                    imgui.text_wrapped(plain(self.quality_status))
                 if imgui.small_button("measure again"):
                     res.remeasure = True
             imgui.end_disabled()
@@ -715,86 +738,3 @@ def _camera_problem(pos, tgt) -> str | None:
     except SceneError as e:
         return str(e).split(": ", 1)[-1]
     return None
-
-
-# ------------------------------------------------------------ HUD and help
-
-
-def draw_hud(lines: list[str], message: str = "") -> None:
-    flags = (imgui.WindowFlags_.no_decoration | imgui.WindowFlags_.always_auto_resize
-             | imgui.WindowFlags_.no_saved_settings | imgui.WindowFlags_.no_focus_on_appearing
-             | imgui.WindowFlags_.no_nav | imgui.WindowFlags_.no_inputs | imgui.WindowFlags_.no_move)
-    imgui.set_next_window_pos(imgui.ImVec2(HUD_MARGIN, HUD_MARGIN), imgui.Cond_.always)
-    imgui.set_next_window_bg_alpha(0.55)
-    imgui.begin("##hud", None, flags)
-    # a message can be long (a failed F5 names the file, the key and what was
-    # expected): wrapped 6 px inside the window's right edge, not cut there
-    width = imgui.get_io().display_size.x
-    imgui.push_text_wrap_pos(max(HUD_MIN_WRAP, width - 2 * HUD_MARGIN - imgui.get_style().window_padding.x))
-    for line in lines:
-        imgui.text(_plain(line))  # "max error ...: measuring…" showed "measuring?"
-    if message:
-        imgui.text_colored(imgui.ImVec4(1.0, 0.8, 0.3, 1.0), _plain(message))
-    imgui.pop_text_wrap_pos()
-    global hud_rect
-    pos, size = imgui.get_window_pos(), imgui.get_window_size()
-    hud_rect = (pos.x, pos.y, pos.x + size.x, pos.y + size.y)
-    imgui.end()
-
-
-HUD_MARGIN = 6.0      # the HUD's distance from the window's edges
-HUD_MIN_WRAP = 120.0  # narrower windows cut the text instead of wrapping every word
-hud_rect = (0.0, 0.0, 0.0, 0.0)  # where the HUD was last drawn: x0, y0, x1, y1 (tests)
-
-
-def _plain(text: str) -> str:
-    return text.replace("`", "").replace("\u2026", "...")  # the default font has no ellipsis
-
-
-_help_drawn_size: tuple[int, int] | None = None  # the window size the help was last drawn for
-help_rect = (0.0, 0.0, 0.0, 0.0)  # where the help window is: x0, y0, x1, y1 (tests)
-
-
-def draw_help(size: tuple[int, int]) -> bool:
-    """The help overlay; returns False when its close button was pressed."""
-    global _help_drawn_size, help_rect
-    w, h = size
-    # centred when it opens, and again when the window's size changed (as
-    # the panel: left where it was, it could end up outside a smaller window)
-    cond = imgui.Cond_.always if (w, h) != _help_drawn_size else imgui.Cond_.appearing
-    _help_drawn_size = (w, h)
-    imgui.set_next_window_pos(imgui.ImVec2(w * 0.5, h * 0.5), cond, imgui.ImVec2(0.5, 0.5))
-    imgui.set_next_window_size_constraints(imgui.ImVec2(100.0, 60.0), imgui.ImVec2(max(200.0, w - 20.0),
-                                                                                   max(100.0, h - 20.0)))
-    flags = imgui.WindowFlags_.no_saved_settings | imgui.WindowFlags_.no_collapse | \
-        imgui.WindowFlags_.always_auto_resize
-    visible, keep_open = imgui.begin("Controls (H / F1 to close)", True, flags)
-    pos, wsize = imgui.get_window_pos(), imgui.get_window_size()
-    help_rect = (pos.x, pos.y, pos.x + wsize.x, pos.y + wsize.y)
-    if visible:
-        key_w = max(imgui.calc_text_size(k).x for k, _ in HELP)
-        wrap = min(520.0, w - key_w - 60.0)
-        if wrap >= 160.0:  # a table: input | effect
-            if imgui.begin_table("controls", 2, imgui.TableFlags_.borders | imgui.TableFlags_.sizing_fixed_fit):
-                imgui.table_setup_column("input")
-                imgui.table_setup_column("effect", imgui.TableColumnFlags_.width_fixed, wrap)
-                imgui.table_headers_row()
-                for key, what in HELP:
-                    imgui.table_next_row()
-                    imgui.table_next_column()
-                    imgui.text(key)
-                    imgui.table_next_column()
-                    imgui.text_wrapped(_plain(what))
-                imgui.end_table()
-        else:  # a narrow window: each input above its effect
-            # the wrap position is window-local: the window is at most
-            # w - 20 wide, less its padding and the scrollbar at the right
-            imgui.push_text_wrap_pos(max(100.0, w - 56.0))
-            for key, what in HELP:
-                imgui.text_colored(imgui.ImVec4(1.0, 0.85, 0.4, 1.0), key)
-                imgui.indent(12.0)                  # every wrapped line of the effect, not just its first
-                imgui.text_wrapped(_plain(what))
-                imgui.unindent(12.0)
-            imgui.pop_text_wrap_pos()
-    imgui.end()
-    return bool(keep_open) if keep_open is not None else True
