@@ -100,3 +100,31 @@ def test_an_unreadable_original_falls_back_to_a_new_file(tmp_path):
     f.unlink()
     text = scene_file_text(scene, tmp_path / "again.toml")
     assert text.splitlines()[:1] == ['name = "gone"'] and "fov = 30.0" in text
+
+
+def test_the_command_line_s_values_are_saved_as_the_file_had_them(tmp_path):
+    """`glassray view default --samples 1 --fov 30 --light-position ...`:
+    the run looks at the file that way, it does not edit it.  Saved
+    unedited, the file comes back byte for byte; a value changed since (the
+    panel's samples, an orbit's camera) is an edit and is written."""
+    from viewer.scene.load import with_overrides
+    from viewer.scene.save import as_the_file_had, overrides_of
+
+    from_file = load_scene("default")
+    text = Path(from_file.path).read_text()
+    loaded = with_overrides(from_file, samples=1, fov=30.0, light_position=(1.0, 5.0, 2.0))
+    overrides = overrides_of(loaded, from_file)
+    assert set(overrides) == {("render", "samples"), ("camera", "fov"), ("lights", 0, "position")}
+    assert scene_file_text(as_the_file_had(loaded, overrides)) == text
+    assert scene_file_text(loaded) != text                       # what it would write without
+    edited = copy.deepcopy(loaded)
+    edited.render.samples = 4
+    edited.camera.position = (3.0, 2.0, 5.0)
+    saved = as_the_file_had(edited, overrides)
+    assert (saved.render.samples, saved.camera.fov, saved.camera.position) == (4, from_file.camera.fov, (3.0, 2.0, 5.0))
+    assert saved.lights[0].position == from_file.lights[0].position
+    assert edited.render.samples == 4 and edited.camera.fov == 30.0  # the viewer's own scene is left alone
+    # a file without the overrides' light (a light removed since): no error
+    gone = copy.deepcopy(loaded)
+    gone.lights = []
+    assert as_the_file_had(gone, overrides).lights == []

@@ -78,6 +78,9 @@ def test_ctrl_z_and_ctrl_y_are_undo_and_redo_and_ctrl_keeps_the_light_keys_quiet
     light = c.scene.lights[0].position
     assert c.key("w", ctrl=True) is None and c.scene.lights[0].position == light
     assert c.key("z") is None                                    # plain Z does nothing
+    # Ctrl+S saves; S alone still moves the light (+z)
+    assert c.key("s", ctrl=True) == "save_scene" and c.scene.lights[0].position == light
+    assert c.key("s") is None and c.scene.lights[0].position[2] > light[2]
 
 
 SCRIPT = """

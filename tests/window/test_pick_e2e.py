@@ -7,6 +7,7 @@ picture back bit for bit, and Esc clears the selection before it quits."""
 from __future__ import annotations
 
 import shutil
+import time
 
 import numpy as np
 import pytest
@@ -29,7 +30,10 @@ def orange(img: np.ndarray) -> np.ndarray:
 
 
 def click(v: Viewer, xy) -> None:
+    """Move there, then click, as a hand does: ImGui learns at its next
+    frame that the pointer left the panel (or came onto it)."""
     v.xdo("mousemove", "--window", v.wid, str(xy[0]), str(xy[1]))
+    time.sleep(0.2)
     v.xdo("click", "1")
 
 
@@ -79,6 +83,46 @@ def test_click_selects_the_ball_and_ctrl_z_takes_its_move_back(xdisplay, tmp_pat
         opened = settled_shot(v, side)
         assert np.abs(opened[side].astype(int) - closed[side].astype(int)).mean() > 12
         v.key("Escape")
+        assert wait_for(v, "nothing selected") < 15
+        assert v.quit() == 0
+    finally:
+        v.close()
+
+
+def test_save_from_the_window_keeps_the_file_and_writes_only_the_move(xdisplay, tmp_path):
+    """The shipped default scene, copied to a file of the user's and viewed
+    with `--samples 1`: "Save scene" in the panel, unedited, writes it back
+    byte for byte (the command line's samples are how this run looks at the
+    file, not an edit of it); after the ball is clicked and moved with an
+    arrow key, Ctrl+S changes only the ball's `center` line, and the file
+    loads back to the moved ball."""
+    from importlib import resources
+
+    from viewer.api import load_scene
+
+    mine = tmp_path / "my.toml"
+    original = resources.files("viewer.scene.builtin").joinpath("default.toml").read_bytes()
+    mine.write_bytes(original)
+    v = Viewer(xdisplay, tmp_path, str(mine), "--size", "480x270", "--no-vsync", "--samples", "1")
+    try:
+        v.key("Tab")
+        settled_shot(v, (slice(0, 270), slice(256, 480)))
+        save = (355, 62)                                   # "Save scene", right of the path box (my.toml)
+        click(v, save)
+        assert wait_for(v, f"saved scene {mine.resolve()}") < 15
+        assert mine.read_bytes() == original
+        click(v, BALL)
+        assert wait_for(v, "selected 4: ball (sphere)") < 15
+        v.key("Right")
+        v.key("ctrl+s")                                    # the panel has scrolled to the ball's node
+        assert wait_for(v, f"saved scene {mine.resolve()}") < 15
+        old, new = original.decode().splitlines(), mine.read_text().splitlines()
+        changed = [(a, b) for a, b in zip(old, new) if a != b]
+        assert len(old) == len(new) and len(changed) == 1, changed
+        assert changed[0][0].lstrip().startswith("center") and changed[0][1].lstrip().startswith("center")
+        before, after = load_scene(original.decode()).objects[4], load_scene(mine).objects[4]
+        assert after.center != before.center and after.center[1] == before.center[1]   # along the floor
+        v.key("Escape")                                    # the selection first, then quit
         assert wait_for(v, "nothing selected") < 15
         assert v.quit() == 0
     finally:

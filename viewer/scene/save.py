@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import os
 from pathlib import Path
 from typing import Any
@@ -236,3 +237,49 @@ def save_scene(scene: Scene, path: Path) -> None:
     write_atomic(Path(path), scene_file_text(scene, Path(path)).encode("utf-8"))
 
 
+
+
+# ------------------------------------------------------------ the command line's values
+
+def _override_paths(scene: Scene) -> list[tuple]:
+    """Where the values a command line can set live in a scene
+    (scene.load.with_overrides), as attribute paths (an int: a list index)."""
+    return [("render", "samples"), ("render", "max_depth"), ("render", "min_weight"),
+            ("camera", "position"), ("camera", "target"), ("camera", "fov"),
+            *(("lights", i, "position") for i in range(len(scene.lights)))]
+
+
+def _get(obj: Any, path: tuple) -> Any:
+    for p in path:
+        obj = obj[p] if isinstance(p, int) else getattr(obj, p)
+    return obj
+
+
+def overrides_of(loaded: Scene, from_file: Scene) -> dict[tuple, tuple[Any, Any]]:
+    """The values of `loaded` (a file read with command-line overrides) that
+    the command line set: {path: (its value, the file's)}."""
+    out = {}
+    for path in _override_paths(loaded):
+        try:
+            mine, theirs = _get(loaded, path), _get(from_file, path)
+        except (IndexError, AttributeError):
+            continue
+        if mine != theirs:
+            out[path] = (mine, theirs)
+    return out
+
+
+def as_the_file_had(scene: Scene, overrides: dict[tuple, tuple[Any, Any]]) -> Scene:
+    """`scene` to be saved, with each value the command line set
+    (overrides_of) and nobody changed since put back as the file had it: an
+    override is how this run looked at the file, not an edit of it
+    (`glassray view my.toml --samples 1`, saved unedited, is my.toml).  A
+    value changed since (in the panel, by orbiting) is an edit and stays."""
+    out = copy.deepcopy(scene)
+    for path, (mine, theirs) in overrides.items():
+        try:
+            if _get(out, path) == mine:
+                setattr(_get(out, path[:-1]), path[-1], theirs)
+        except (IndexError, AttributeError):
+            continue
+    return out

@@ -36,7 +36,9 @@ from ..base.errors import Failure
 from ..base.views import raw_view
 from ..gpu.context import size_failure
 from ..gpu.renderer import Renderer
-from ..scene.model import Scene
+from ..scene.load import load_scene
+from ..scene.model import Scene, SceneError
+from ..scene.save import overrides_of
 from .controls import Controls
 from .history import EditHistory
 from .hud import DEPTH, HINT, NOTE, RESOLUTION, STATUS, VIEW_NAMES, help_text, window_picture
@@ -63,6 +65,19 @@ FPS_WINDOW_S = 0.5
 #: does not take it away).
 MESSAGE_S = 6.0
 READ_S = 1.0
+
+
+def command_line_values(loaded: Scene) -> dict:
+    """The values of `loaded` (its file with the command line's overrides)
+    that the command line set, and the file's own (scene.save.overrides_of):
+    "Save scene" writes the file's.  Empty when the file cannot be read
+    alone (then there is nothing to put back)."""
+    if loaded.path is None:
+        return {}
+    try:
+        return overrides_of(loaded, load_scene(str(loaded.path)))
+    except (SceneError, OSError):
+        return {}
 
 
 def run(args, load) -> int:
@@ -209,6 +224,7 @@ class Viewer(InputEvents, ObjectPicking):
             self._imgui_ready = True
             self.panel = Panel(self.scene, DEFAULT_TARGET_MS)
             self.panel.adaptive = self.prog.adaptive
+            self.panel.overrides = command_line_values(self.file_scene)
         except Exception as e:
             self.imgui_error = f"{type(e).__name__}: {e}"
             try:
@@ -411,6 +427,8 @@ class Viewer(InputEvents, ObjectPicking):
                 self.select(None)
             elif act in ("undo", "redo"):
                 self.undo(redo=act == "redo")
+            elif act == "save_scene":
+                self.save_scene()
             elif act == "screenshot_window":
                 # ImGui shows a window that just opened one frame later: let the
                 # overlays settle for a frame, then read the window back
@@ -732,6 +750,7 @@ class Viewer(InputEvents, ObjectPicking):
         self.controls.rebase(scene, start=start)
         if self.panel is not None:
             self.panel.error = ""
+            self.panel.overrides = command_line_values(fresh)
         glfw.set_window_title(self.window, self._title(scene))
         self.debug_dirty = True
         if self.max_error.on:
@@ -747,6 +766,16 @@ class Viewer(InputEvents, ObjectPicking):
         i = self.controls.selected
         if i is not None and not (same_file and i < len(scene.objects)):
             self._set_selected(None)
+
+    def save_scene(self) -> bool:
+        """Ctrl+S: the panel's "Save scene" (its path box, the command line's
+        values as the file had them), said in the HUD."""
+        if self.panel is None:
+            self.say(f"cannot save: there is no settings panel ({self.imgui_error})", error=True)
+            return False
+        ok = self.panel.save(self.scene)
+        self.say(self.panel.status, keep=not ok)
+        return ok
 
     def undo(self, redo: bool = False) -> bool:
         """Ctrl+Z (redo: Ctrl+Shift+Z, Ctrl+Y): put back the parts of the

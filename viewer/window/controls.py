@@ -41,8 +41,9 @@ OBJECT_KEYS = {"left": ("floor-right", -1.0), "right": ("floor-right", 1.0),
                "up": ("floor-ahead", 1.0), "down": ("floor-ahead", -1.0),
                "pageup": ("up", 1.0), "pagedown": ("up", -1.0)}
 
-#: With Ctrl held: (key, shift) -> the action (undo and redo of the panel's edits).
-CTRL_ACTIONS = {("z", False): "undo", ("z", True): "redo", ("y", False): "redo"}
+#: With Ctrl held: (key, shift) -> the action (undo and redo of the panel's
+#: edits, saving the scene as the panel's "Save scene" does).
+CTRL_ACTIONS = {("z", False): "undo", ("z", True): "redo", ("y", False): "redo", ("s", False): "save_scene"}
 
 #: Keys that the window handles (they return an action name from Controls.key).
 ACTIONS = {"p": "screenshot", "f12": "screenshot_window", "tab": "toggle_panel", "f5": "reload",
@@ -84,6 +85,8 @@ EXTRA_HELP = [
                                   "as the camera faces it, up / down (hold shift: faster)"),
     ("ctrl+left-drag", "move the selected object in the plane facing the camera, under the cursor"),
     ("Ctrl+Z / Ctrl+Shift+Z or Ctrl+Y", "undo / redo the settings panel's edits and object moves"),
+    ("Ctrl+S", "save the scene as the panel's Save scene does (to the path in its box: the scene's own file, "
+               "or NAME.toml in the current folder for a built-in scene)"),
     ("drop a .toml file", "open that scene (its camera if the file has one, else the view stays)"),
 ]
 

@@ -25,7 +25,7 @@ from .controls import VIEWS, first_point_light
 from .overlays import HUD_MIN_WIDTH, hud_body, plain
 from ..scene.model import (MAX_LIGHTS, MAX_OBJECTS, MAX_TRANSPARENT_OBJECTS, Camera, Checker, Light, Material, Scene,
                            SceneError, SceneObject)
-from ..scene.save import save_scene
+from ..scene.save import as_the_file_had, save_scene
 from ..scene.load import scene_from_dict, validate_camera
 
 _CLAMP = imgui.SliderFlags_.always_clamp
@@ -97,6 +97,9 @@ class Panel:
         # replaced them with its pick (set by the app): "Save scene" writes
         # these, not a pick measured for this machine and window
         self.user_render: tuple[int, int, float] | None = None
+        # the values the command line set ({path: (its value, the file's)},
+        # scene.save.overrides_of; the app sets it): saved as the file had them
+        self.overrides: dict = {}
         self.adaptive = True  # adaptive accumulation (the app keeps it in step with Progressive)
         self._drawn_size: tuple[float, float] | None = None  # the window size it was last drawn for
         self.edit_note = ""  # why the last edit of objects, lights or materials was refused
@@ -612,6 +615,7 @@ class Panel:
             scene = copy.deepcopy(scene)
             r = scene.render
             r.samples, r.max_depth, r.min_weight = self.user_render
+        scene = as_the_file_had(scene, self.overrides)
         try:
             save_scene(scene, path)
         except (OSError, ValueError) as e:
