@@ -1,7 +1,7 @@
 """The viewer's settings panel, in Dear ImGui (imgui-bundle); the HUD and
-the help overlay are window/overlays.py's.  Widgets only: the window module owns GLFW and the
-ImGui backends and calls these between ``imgui.new_frame()`` and
-``imgui.render()``.
+the help overlay are window/overlays.py's.  Widgets only: the window module
+owns GLFW and the ImGui backends and calls these between
+``imgui.new_frame()`` and ``imgui.render()``.
 
 The panel edits the scene in place and returns True when it changed
 something that alters the picture.  Every value is kept inside the range the
