@@ -108,13 +108,15 @@ def test_the_command_line_s_values_are_saved_as_the_file_had_them(tmp_path):
     unedited, the file comes back byte for byte; a value changed since (the
     panel's samples, an orbit's camera) is an edit and is written."""
     from viewer.scene.load import with_overrides
-    from viewer.scene.save import as_the_file_had, overrides_of
+    from viewer.scene.save import as_the_file_had, overrides_of, overrides_of_file
 
     from_file = load_scene("default")
     text = Path(from_file.path).read_text()
     loaded = with_overrides(from_file, samples=1, fov=30.0, light_position=(1.0, 5.0, 2.0))
     overrides = overrides_of(loaded, from_file)
     assert set(overrides) == {("render", "samples"), ("camera", "fov"), ("lights", 0, "position")}
+    assert overrides_of_file(loaded) == overrides                  # the file read again, alone
+    assert overrides_of_file(replace(loaded, path=None)) == {}     # no file: nothing to put back
     assert scene_file_text(as_the_file_had(loaded, overrides)) == text
     assert scene_file_text(loaded) != text                       # what it would write without
     edited = copy.deepcopy(loaded)

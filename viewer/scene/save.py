@@ -11,7 +11,7 @@ import tomli_w
 import tomlkit
 
 from ..base.files import write_atomic
-from .load import scene_from_toml
+from .load import load_scene, scene_from_toml
 from .model import Material, Scene, SceneError, Sky
 
 
@@ -267,6 +267,18 @@ def overrides_of(loaded: Scene, from_file: Scene) -> dict[tuple, tuple[Any, Any]
         if mine != theirs:
             out[path] = (mine, theirs)
     return out
+
+
+def overrides_of_file(loaded: Scene) -> dict[tuple, tuple[Any, Any]]:
+    """overrides_of `loaded` against its own file read again alone: what
+    the command line set.  Empty when there is no file or it no longer
+    loads (then there is nothing to put back)."""
+    if loaded.path is None:
+        return {}
+    try:
+        return overrides_of(loaded, load_scene(str(loaded.path)))
+    except (SceneError, OSError):
+        return {}
 
 
 def as_the_file_had(scene: Scene, overrides: dict[tuple, tuple[Any, Any]]) -> Scene:

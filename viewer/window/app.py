@@ -36,9 +36,8 @@ from ..base.errors import Failure
 from ..base.views import raw_view
 from ..gpu.context import size_failure
 from ..gpu.renderer import Renderer
-from ..scene.load import load_scene
-from ..scene.model import Scene, SceneError
-from ..scene.save import overrides_of
+from ..scene.model import Scene
+from ..scene.save import overrides_of_file
 from .controls import Controls
 from .history import EditHistory
 from .hud import DEPTH, HINT, NOTE, RESOLUTION, STATUS, VIEW_NAMES, help_text, window_picture
@@ -65,19 +64,6 @@ FPS_WINDOW_S = 0.5
 #: does not take it away).
 MESSAGE_S = 6.0
 READ_S = 1.0
-
-
-def command_line_values(loaded: Scene) -> dict:
-    """The values of `loaded` (its file with the command line's overrides)
-    that the command line set, and the file's own (scene.save.overrides_of):
-    "Save scene" writes the file's.  Empty when the file cannot be read
-    alone (then there is nothing to put back)."""
-    if loaded.path is None:
-        return {}
-    try:
-        return overrides_of(loaded, load_scene(str(loaded.path)))
-    except (SceneError, OSError):
-        return {}
 
 
 def run(args, load) -> int:
@@ -224,7 +210,7 @@ class Viewer(InputEvents, ObjectPicking):
             self._imgui_ready = True
             self.panel = Panel(self.scene, DEFAULT_TARGET_MS)
             self.panel.adaptive = self.prog.adaptive
-            self.panel.overrides = command_line_values(self.file_scene)
+            self.panel.overrides = overrides_of_file(self.file_scene)
         except Exception as e:
             self.imgui_error = f"{type(e).__name__}: {e}"
             try:
@@ -750,7 +736,7 @@ class Viewer(InputEvents, ObjectPicking):
         self.controls.rebase(scene, start=start)
         if self.panel is not None:
             self.panel.error = ""
-            self.panel.overrides = command_line_values(fresh)
+            self.panel.overrides = overrides_of_file(fresh)
         glfw.set_window_title(self.window, self._title(scene))
         self.debug_dirty = True
         if self.max_error.on:
