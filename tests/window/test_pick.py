@@ -144,3 +144,32 @@ def test_a_click_on_the_open_panel_is_not_a_pick():
     assert not ObjectPicking._on_panel(v, (472, 62))       # the panel's right edge is outside
     v.show_panel = False                                   # hidden: its last rect means nothing
     assert not ObjectPicking._on_panel(v, (300, 62))
+
+
+def test_a_press_outside_imgui_s_windows_is_the_view_s_even_when_imgui_last_saw_the_panel():
+    """ImGui's want_capture_mouse is from its last frame: moved off the panel
+    and pressed before the next one, the press was taken as the panel's.
+    Outside the panel and the help it is the view's, unless a widget is
+    held or a popup is open."""
+    from types import SimpleNamespace
+
+    pytest.importorskip("glfw")
+    from viewer.window.events import InputEvents
+
+    state = {"active": False, "popup": False}
+    imgui = SimpleNamespace(get_io=lambda: SimpleNamespace(want_capture_mouse=True),
+                            is_any_item_active=lambda: state["active"],
+                            is_popup_open=lambda name, flags: state["popup"],
+                            PopupFlags_=SimpleNamespace(any_popup_id=1, any_popup_level=2))
+    v = SimpleNamespace(_imgui_ready=True, imgui=imgui,
+                        _ui_rects=lambda: [(256.0, 8.0, 472.0, 262.0)])
+    wants = lambda at: InputEvents._ui_wants_mouse(v, at)          # noqa: E731
+    assert wants((300, 62)) and not wants((115, 150))
+    state["active"] = True                 # a slider dragged out of the panel keeps the mouse
+    assert wants((115, 150))
+    state["active"], state["popup"] = False, True
+    assert wants((115, 150))
+    state["popup"] = False
+    assert InputEvents._ui_wants_mouse(v) is True                   # no point given: ImGui's word
+    v._imgui_ready = False
+    assert not wants((300, 62))

@@ -146,6 +146,7 @@ class Viewer(InputEvents, ObjectPicking):
 
         self.show_panel = False
         self.show_help = False
+        self._help_rect = None  # where the help was last drawn (_ui_rects)
         self.actions: list[str] = []
         # keys that came while ImGui still had earlier input to take (it takes
         # a few events a frame): (its event id, name, mods, action); shortcut
@@ -621,14 +622,14 @@ class Viewer(InputEvents, ObjectPicking):
         return lines, msg, self.message_kind
 
     def _draw_overlays(self) -> None:
-        from .overlays import draw_help, draw_hud  # imgui_bundle, present once _setup_imgui ran
+        from . import overlays  # imgui_bundle, present once _setup_imgui ran
 
         ds = self.imgui.get_io().display_size
         lines, msg, kind = self._overlay_hud()
         inside = self.show_panel and self.panel.hud_inside((ds.x, ds.y))
         right = self.panel.left_edge((ds.x, ds.y)) if self.show_panel else ds.x
         if not inside:            # else the panel drew it (_ui_new_frame)
-            draw_hud(lines, msg, kind, right=right)
+            overlays.draw_hud(lines, msg, kind, right=right)
         # an auto-sized ImGui window takes its new size one frame late: draw
         # again when the overlays' layout changes
         layout = (len(lines), msg, self.show_help, self.show_panel, inside, right, ds.y)
@@ -636,8 +637,14 @@ class Viewer(InputEvents, ObjectPicking):
             self._overlay_layout = layout
             self.ui_frames = max(self.ui_frames, 2)
         if self.show_help:
-            ds = self.imgui.get_io().display_size
-            self.show_help = draw_help((ds.x, ds.y))
+            self.show_help = overlays.draw_help((ds.x, ds.y))
+        self._help_rect = overlays.help_rect if self.show_help else None
+
+    def _ui_rects(self) -> list[tuple[float, float, float, float]]:
+        """Where ImGui's windows that take the mouse were last drawn (window
+        coordinates): the panel and the help, when shown."""
+        rects = [self.panel.rect] if self.show_panel and self.panel is not None else []
+        return rects + ([self._help_rect] if self.show_help and self._help_rect else [])
 
     # ------------------------------------------------------------ debug views (V)
 

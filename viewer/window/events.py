@@ -35,8 +35,20 @@ class InputEvents:
 
     # ------------------------------------------------------------ callbacks
 
-    def _ui_wants_mouse(self) -> bool:
-        return self._imgui_ready and self.imgui.get_io().want_capture_mouse
+    def _ui_wants_mouse(self, at: tuple[float, float] | None = None) -> bool:
+        """Whether ImGui takes the mouse (a press or a scroll `at` a window
+        point).  ImGui says so from where the pointer was at its last frame:
+        moved off the panel and pressed before the next one, the press was
+        still the panel's, and a quick click in the view did nothing.  So a
+        press `at` a point outside ImGui's windows is the view's, unless a
+        widget is held (a slider dragged past the panel's edge) or a popup
+        is open (a combo's list can reach outside the panel)."""
+        if not (self._imgui_ready and self.imgui.get_io().want_capture_mouse):
+            return False
+        if at is None or self.imgui.is_any_item_active() or self.imgui.is_popup_open(
+                "", self.imgui.PopupFlags_.any_popup_id | self.imgui.PopupFlags_.any_popup_level):
+            return True
+        return any(x0 <= at[0] < x1 and y0 <= at[1] < y1 for x0, y0, x1, y1 in self._ui_rects())
 
     def _ui_wants_keys(self) -> bool:
         return self._imgui_ready and self.imgui.get_io().want_text_input
@@ -104,7 +116,7 @@ class InputEvents:
         # pointer now could already see a later position)
         x, y = self._cursor if self._cursor is not None else glfw.get_cursor_pos(win)
         if action == glfw.PRESS:
-            if not self._ui_wants_mouse():
+            if not self._ui_wants_mouse((x, y)):
                 self.controls.press(name, x, y, shift=bool(mods & glfw.MOD_SHIFT), ctrl=bool(mods & glfw.MOD_CONTROL))
         elif action == glfw.RELEASE:
             self.controls.release(name, x, y)
