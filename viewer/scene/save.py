@@ -237,8 +237,6 @@ def save_scene(scene: Scene, path: Path) -> None:
     write_atomic(Path(path), scene_file_text(scene, Path(path)).encode("utf-8"))
 
 
-
-
 # ------------------------------------------------------------ the command line's values
 
 def _override_paths(scene: Scene) -> list[tuple]:

@@ -35,25 +35,26 @@ def hud_body(lines, message: str = "", kind: str = "info", room: float | None = 
              wrap: float | None = None) -> None:
     """The HUD's text in the current ImGui window at its wrap position:
     `lines` (strings, or (string, rank) with hud.py's ranks; a string is a
-    NOTE) and then the message in its colour, never left out.  `room`: the height they
-    may take, `wrap` the width they wrap at (default: what the window's
-    content region has); lines that do not fit are left out by rank."""
-    ranked = [(plain(t), NOTE) if isinstance(t, str) else (plain(t[0]), t[1]) for t in lines]
-    if message:
-        ranked.append((plain(message), ALWAYS))
-    shown = [True] * len(ranked)
-    if room is not None and ranked:
+    NOTE), then the message in the colour of its `kind`, never left out.
+    `room`: the height they may take, `wrap` the width they wrap at
+    (default: what the window's content region has); lines that do not fit
+    are left out by rank."""
+    texts = [plain(t) if isinstance(t, str) else plain(t[0]) for t in lines]
+    ranks = [NOTE if isinstance(t, str) else t[1] for t in lines]
+    message = plain(message)
+    shown = [True] * len(texts)
+    if room is not None and texts:
         wrap = imgui.get_content_region_avail().x if wrap is None else wrap
-        heights = [imgui.calc_text_size(t, wrap_width=max(1.0, wrap)).y for t, _ in ranked]
-        shown = lines_that_fit([r for _, r in ranked], heights, room, imgui.get_style().item_spacing.y)
-    texts = [t for (t, _), s in zip(ranked, shown) if s]
-    if message and shown[-1]:
-        texts.pop()
-    for text in texts:
-        imgui.text_wrapped(text)
-    if message and shown[-1]:
+        every = texts + ([message] if message else [])
+        heights = [imgui.calc_text_size(t, wrap_width=max(1.0, wrap)).y for t in every]
+        fit = lines_that_fit(ranks + ([ALWAYS] if message else []), heights, room, imgui.get_style().item_spacing.y)
+        shown = fit[:len(texts)]
+    for text, show in zip(texts, shown):
+        if show:
+            imgui.text_wrapped(text)
+    if message:
         imgui.push_style_color(imgui.Col_.text, imgui.ImVec4(*HUD_COLORS.get(kind, HUD_COLORS["info"])))
-        imgui.text_wrapped(plain(message))
+        imgui.text_wrapped(message)
         imgui.pop_style_color()
 
 
@@ -86,6 +87,8 @@ def draw_hud(lines, message: str = "", kind: str = "info", right: float | None =
 
 _help_drawn_size: tuple[int, int] | None = None  # the window size the help was last drawn for
 help_rect = (0.0, 0.0, 0.0, 0.0)  # where the help window is: x0, y0, x1, y1 (tests)
+
+
 def draw_help(size: tuple[int, int]) -> bool:
     """The help overlay; returns False when its close button was pressed."""
     global _help_drawn_size, help_rect
