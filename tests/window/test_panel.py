@@ -234,7 +234,7 @@ def test_the_help_stays_in_a_window_resized_while_it_is_open(ui):
 
 def test_the_add_buttons_stay_inside_a_narrow_panel(ui, monkeypatch):
     # side by side, "add plane" was cut off at the panel's edge in a 640 px window
-    from viewer.window import overlays as ui_module
+    from viewer.window import panel as ui_module
     from viewer.window.panel import Panel
 
     real = imgui.small_button

@@ -136,14 +136,20 @@ def test_a_click_on_the_open_panel_is_not_a_pick():
     from types import SimpleNamespace
 
     pytest.importorskip("glfw")
-    from viewer.window.picking import ObjectPicking
+    from viewer.window.app import Viewer
+    from viewer.window.events import InputEvents
 
-    v = SimpleNamespace(show_panel=True, panel=SimpleNamespace(rect=(256.0, 8.0, 472.0, 262.0)))
-    assert ObjectPicking._on_panel(v, (300, 62))
-    assert not ObjectPicking._on_panel(v, (115, 150))      # the ball, left of the panel
-    assert not ObjectPicking._on_panel(v, (472, 62))       # the panel's right edge is outside
-    v.show_panel = False                                   # hidden: its last rect means nothing
-    assert not ObjectPicking._on_panel(v, (300, 62))
+    v = SimpleNamespace(show_panel=True, panel=SimpleNamespace(rect=(256.0, 8.0, 472.0, 262.0)),
+                        show_help=False, _help_rect=None)
+    v._ui_rects = lambda: Viewer._ui_rects(v)
+    on_ui = lambda at: InputEvents._on_ui(v, at)            # noqa: E731  (what _take_pick asks)
+    assert on_ui((300, 62))
+    assert not on_ui((115, 150))                            # the ball, left of the panel
+    assert not on_ui((472, 62))                             # the panel's right edge is outside
+    v.show_help, v._help_rect = True, (100.0, 100.0, 200.0, 200.0)
+    assert on_ui((115, 150))                                # the help over the ball: its click
+    v.show_panel, v.show_help = False, False                # hidden: their last rects mean nothing
+    assert not on_ui((300, 62)) and not on_ui((115, 150))
 
 
 def test_a_press_outside_imgui_s_windows_is_the_view_s_even_when_imgui_last_saw_the_panel():
@@ -163,6 +169,7 @@ def test_a_press_outside_imgui_s_windows_is_the_view_s_even_when_imgui_last_saw_
                             PopupFlags_=SimpleNamespace(any_popup_id=1, any_popup_level=2))
     v = SimpleNamespace(_imgui_ready=True, imgui=imgui,
                         _ui_rects=lambda: [(256.0, 8.0, 472.0, 262.0)])
+    v._on_ui = lambda at: InputEvents._on_ui(v, at)
     wants = lambda at: InputEvents._ui_wants_mouse(v, at)          # noqa: E731
     assert wants((300, 62)) and not wants((115, 150))
     state["active"] = True                 # a slider dragged out of the panel keeps the mouse

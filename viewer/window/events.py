@@ -48,6 +48,11 @@ class InputEvents:
         if at is None or self.imgui.is_any_item_active() or self.imgui.is_popup_open(
                 "", self.imgui.PopupFlags_.any_popup_id | self.imgui.PopupFlags_.any_popup_level):
             return True
+        return self._on_ui(at)
+
+    def _on_ui(self, at: tuple[float, float]) -> bool:
+        """Whether window point `at` lies on one of ImGui's windows that take
+        the mouse (the panel, the help: _ui_rects), whatever ImGui last saw."""
         return any(x0 <= at[0] < x1 and y0 <= at[1] < y1 for x0, y0, x1, y1 in self._ui_rects())
 
     def _ui_wants_keys(self) -> bool:

@@ -31,7 +31,11 @@ class ObjectPicking:
     def _take_pick(self, fbw: int, fbh: int) -> None:
         """A click since the last frame: select what is under it."""
         req, self.controls.pick_request = self.controls.pick_request, None
-        if req is None or self._on_panel(req):
+        # a click on the panel (or the help) is theirs, even when ImGui did
+        # not yet know the pointer was over it: moved there and clicked
+        # within one frame, it had not claimed the mouse, and the click
+        # selected in the view behind
+        if req is None or self._on_ui(req):
             return
         ww, wh = glfw.get_window_size(self.window)
         # window coordinates to framebuffer pixels (they differ on a HiDPI screen)
@@ -41,16 +45,6 @@ class ObjectPicking:
         along = objects_along(self.scene, fbw, fbh, x, y) if again and first >= 0 else []
         self._last_click = req
         self.select(next_pick(first, along, self.controls.selected, again))
-
-    def _on_panel(self, xy) -> bool:
-        """Whether window point `xy` is on the open panel.  A click there is
-        the panel's, even when ImGui did not yet know the pointer was over
-        it (moved there and clicked within one frame, it had not claimed the
-        mouse, and the click selected in the view behind)."""
-        if not (self.show_panel and self.panel is not None):
-            return False
-        x0, y0, x1, y1 = self.panel.rect
-        return x0 <= xy[0] < x1 and y0 <= xy[1] < y1
 
     def select(self, index: int | None) -> None:
         """Select object `index` of the scene (None: nothing): outlined, and
